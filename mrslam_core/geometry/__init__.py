@@ -1,0 +1,1 @@
+"""Geometry: SE(2) poses, stereo triangulation."""

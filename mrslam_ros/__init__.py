@@ -1,0 +1,1 @@
+"""mrslam_ros: thin rclpy nodes and tools around mrslam_core."""

@@ -1,0 +1,41 @@
+"""The ``mrslam`` command: one sub-command per job, each a ``main(argv) -> int`` in its own module.
+
+Sub-commands that need ROS import rclpy only when they run, so ``mrslam mrclam`` and
+``mrslam bench`` work where rclpy is not installed.
+"""
+
+from __future__ import annotations
+
+import importlib
+import sys
+
+COMMANDS = {
+    "demo": ("mrslam_ros.demo", "closed loop in simulation: sim, frontends, SLAM, exploration"),
+    "launch": ("mrslam_ros.launch", "start the nodes a config YAML lists"),
+    "replay": ("mrslam_ros.replay", "play a rosbag2 recording into the nodes (or --offline)"),
+    "mrclam": ("mrslam_core.pipelines.mrclam", "run the filter on a UTIAS MR.CLAM dataset"),
+    "bench": ("mrslam_core.bench", "benchmarks: mrslam bench {filter,frontend,sim,...}"),
+}
+
+
+def usage() -> str:
+    lines = ["usage: mrslam COMMAND [ARGS]", "", "commands:"]
+    lines += [f"  {name:<8} {doc}" for name, (_, doc) in COMMANDS.items()]
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if not argv or argv[0] in ("-h", "--help"):
+        print(usage())
+        return 0
+    name, rest = argv[0], argv[1:]
+    if name not in COMMANDS:
+        print(f"mrslam: unknown command {name!r}\n\n{usage()}", file=sys.stderr)
+        return 2
+    module = importlib.import_module(COMMANDS[name][0])
+    return int(module.main(rest) or 0)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
