@@ -15,6 +15,7 @@ COMMANDS = {
     "replay": ("mrslam_ros.replay", "play a rosbag2 recording into the nodes (or --offline)"),
     "mrclam": ("mrslam_core.pipelines.mrclam", "run the filter on a UTIAS MR.CLAM dataset"),
     "bench": ("mrslam_core.bench", "benchmarks: mrslam bench {filter,frontend,sim,...}"),
+    "experiment": ("mrslam_core.experiments", "reproducible experiments behind docs/results.md"),
 }
 
 
