@@ -1,0 +1,390 @@
+"""The centralised multi-robot Rao-Blackwellized particle filter (000, sections 3 and 5, Alg. 1).
+
+Every particle holds the SE(2) poses of all K robots and ONE landmark map shared by the team, so a
+robot localises against landmarks that another robot mapped. Per robot update: sample the robot's
+pose from the odometry motion model, associate each observation per particle (Mahalanobis gate D0,
+then the smallest descriptor distance E below E0, else a new landmark), update associated
+landmarks with the EKF (eqs. 6–11), initialise new ones with covariance G⁻¹RG⁻ᵀ, and weight the
+particle by the product of the observation likelihoods (eq. 13). The team weight is the product
+over robots (a sum in log space); the filter resamples (low variance) when the normalised
+effective sample size falls below a threshold; the best particle maximises the summed log weights
+(eq. 14).
+
+All particle state is arrays: poses (M, K, 3), log weights (M,), and a :class:`LandmarkStore`.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from mrslam_core.geometry.se2 import wrap_angle
+from mrslam_core.linalg import is_positive_definite, quad_form, sym_inv_det
+from mrslam_core.slam.config import FilterConfig
+from mrslam_core.slam.landmarks import LandmarkStore
+from mrslam_core.slam.models import ObservationModel, RangeBearingModel, make_model
+from mrslam_core.slam.motion import sample_motion
+from mrslam_core.slam.resampling import (
+    copy_plan,
+    effective_sample_fraction,
+    low_variance_indices,
+    normalise_log_weights,
+)
+from mrslam_core.types import ObservationSet, RobotSighting
+
+LOG_2PI = float(np.log(2.0 * np.pi))
+
+
+class FilterInputError(ValueError):
+    """An update the filter cannot use at all (unknown robot, malformed arrays)."""
+
+
+@dataclass(frozen=True)
+class RobotUpdate:
+    """One robot's input to a team step.
+
+    Attributes:
+        robot: robot name.
+        stamp_ns: time of the update (ns); must increase per robot.
+        odometry: (3,) relative motion (dx [m], dy [m], dθ [rad]) since the robot's previous
+            update, in the robot's base frame at the previous update.
+        observations: landmark observations at ``stamp_ns`` (or None).
+        sightings: range-bearing measurements of other robots at ``stamp_ns``.
+    """
+
+    robot: str
+    stamp_ns: int
+    odometry: np.ndarray
+    observations: ObservationSet | None = None
+    sightings: Sequence[RobotSighting] = ()
+
+
+@dataclass(frozen=True)
+class StepResult:
+    """What a team step did."""
+
+    resampled: bool
+    neff_fraction: float
+    associated: int
+    new_landmarks: int
+    dropped: dict[str, int] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """The filter's answer after a step.
+
+    Attributes:
+        best: index of the best particle (eq. 14).
+        poses: (K, 3) robot poses of the best particle, map frame.
+        mean: (K, 3) weighted mean poses (circular mean for θ).
+        cov: (K, 3, 3) weighted pose covariances.
+    """
+
+    best: int
+    poses: np.ndarray
+    mean: np.ndarray
+    cov: np.ndarray
+
+
+class MultiRobotFastSLAM:
+    """Multi-robot FastSLAM with a shared map.
+
+    Args:
+        config: filter parameters.
+        robots: robot names, in a fixed order (the K axis of the pose array).
+        start_poses: (K, 3) known start poses in the map frame.
+        model: observation model; default from ``config.observation_model``.
+    """
+
+    def __init__(
+        self,
+        config: FilterConfig,
+        robots: Sequence[str],
+        start_poses: np.ndarray,
+        model: ObservationModel | None = None,
+    ):
+        start_poses = np.asarray(start_poses, dtype=float)
+        if len(set(robots)) != len(robots) or not robots:
+            raise FilterInputError(f"robot names must be unique and non-empty, got {robots!r}")
+        if start_poses.shape != (len(robots), 3) or not np.isfinite(start_poses).all():
+            raise FilterInputError(f"start_poses must be finite ({len(robots)}, 3)")
+        self.config = config
+        self.robots = list(robots)
+        self.index = {name: k for k, name in enumerate(self.robots)}
+        self.model = model or make_model(config.observation_model)
+        self.rng = np.random.default_rng(config.seed)
+        m = config.num_particles
+        noise = self.rng.standard_normal((m, len(robots), 3)) * np.asarray(config.initial_pose_sigma)
+        self.poses = start_poses[None] + noise
+        self.poses[..., 2] = wrap_angle(self.poses[..., 2])
+        self.log_w = np.full(m, -np.log(m))
+        self.score = np.zeros(m)
+        self.landmarks = LandmarkStore(m, self.model.dim, 0, config.initial_capacity)
+        self.last_stamp: dict[str, int] = {}
+        self.dropped: Counter[str] = Counter()
+        self.steps = 0
+        self.resamples = 0
+
+    # ------------------------------------------------------------------ public API
+    @property
+    def num_particles(self) -> int:
+        return self.poses.shape[0]
+
+    def step(self, updates: Sequence[RobotUpdate]) -> StepResult:
+        """One team step: every robot's update in order, then resampling if due.
+
+        Updates that cannot be used (unknown robot, non-finite odometry, a stamp not later than
+        the robot's previous one) are dropped and counted in :attr:`dropped`; the state is
+        untouched by them. Observation rows with non-finite values or covariances that are not
+        positive definite are dropped and counted too.
+        """
+        before = sum(self.dropped.values())
+        associated = created = 0
+        for upd in updates:
+            if not self._accept(upd):
+                continue
+            k = self.index[upd.robot]
+            self.last_stamp[upd.robot] = upd.stamp_ns
+            self.poses[:, k] = sample_motion(
+                self.poses[:, k], np.asarray(upd.odometry, float), self.config.motion, self.rng
+            )
+            log_l = np.zeros(self.num_particles)
+            if upd.observations is not None and len(upd.observations):
+                a, c = self._observe(k, upd.observations, log_l)
+                associated += a
+                created += c
+            for sighting in upd.sightings:
+                self._observe_robot(k, sighting, log_l)
+            self.log_w = normalise_log_weights(self.log_w + log_l)
+            self.score += log_l
+        neff = effective_sample_fraction(self.log_w)
+        resampled = neff < self.config.resample_threshold
+        if resampled:
+            self._resample()
+        self.steps += 1
+        after = dict(self.dropped)
+        dropped_now = sum(after.values()) - before
+        return StepResult(
+            resampled, neff, associated, created, {"total": dropped_now} if dropped_now else {}
+        )
+
+    def best_particle(self) -> int:
+        """argmax of the summed log likelihoods over the run (eq. 14)."""
+        return int(np.argmax(self.score))
+
+    def estimate(self) -> Estimate:
+        """Best particle's poses and the weighted mean and covariance of every robot's pose."""
+        w = np.exp(self.log_w)
+        best = self.best_particle()
+        mean_xy = np.einsum("m,mkd->kd", w, self.poses[..., :2])
+        sin = np.einsum("m,mk->k", w, np.sin(self.poses[..., 2]))
+        cos = np.einsum("m,mk->k", w, np.cos(self.poses[..., 2]))
+        mean = np.concatenate([mean_xy, np.arctan2(sin, cos)[:, None]], axis=1)
+        dev = self.poses - mean[None]
+        dev[..., 2] = wrap_angle(dev[..., 2])
+        cov = np.einsum("m,mki,mkj->kij", w, dev, dev)
+        return Estimate(best, self.poses[best].copy(), mean, cov)
+
+    def best_map(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Landmarks of the best particle: (slots, means (N, dim), covs, descriptors, counts)."""
+        best = self.best_particle()
+        slots, mean, cov, desc = self.landmarks.particle_map(best)
+        (count,) = self.landmarks.gather(np.full(slots.size, best), slots, ("count",))
+        return slots, mean, cov, desc, count
+
+    # ------------------------------------------------------------------ internals
+    def _accept(self, upd: RobotUpdate) -> bool:
+        if upd.robot not in self.index:
+            self.dropped["unknown_robot"] += 1
+            return False
+        odo = np.asarray(upd.odometry, dtype=float)
+        if odo.shape != (3,) or not np.isfinite(odo).all():
+            self.dropped["bad_odometry"] += 1
+            return False
+        last = self.last_stamp.get(upd.robot)
+        if last is not None and upd.stamp_ns <= last:
+            self.dropped["stale_stamp"] += 1
+            return False
+        return True
+
+    def _clean(self, obs: ObservationSet) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        dim = self.model.dim
+        if obs.z.shape[1] != dim:
+            raise FilterInputError(
+                f"{obs.robot}: observations have dimension {obs.z.shape[1]}, model "
+                f"{self.model.name} needs {dim}"
+            )
+        ok = np.isfinite(obs.z).all(axis=1) & is_positive_definite(obs.cov)
+        ok &= np.isfinite(obs.descriptors).all(axis=1)
+        if (~ok).any():
+            self.dropped["bad_observation"] += int((~ok).sum())
+        return obs.z[ok], obs.cov[ok], obs.descriptors[ok]
+
+    def _search_radius(self, k: int, z: np.ndarray) -> tuple[np.ndarray, float]:
+        """Mean pose of robot k and a radius that covers every particle's view of the batch."""
+        p = self.poses[:, k]
+        w = np.exp(self.log_w)
+        mean = np.empty(3)
+        mean[:2] = w @ p[:, :2]
+        mean[2] = np.arctan2(w @ np.sin(p[:, 2]), w @ np.cos(p[:, 2]))
+        pos_spread = np.sqrt(((p[:, :2] - mean[:2]) ** 2).sum(1).max())
+        ang_spread = np.abs(wrap_angle(p[:, 2] - mean[2])).max()
+        if isinstance(self.model, RangeBearingModel):
+            reach = float(z[:, 0].max())
+        else:
+            reach = float(np.sqrt((z[:, :2] ** 2).sum(1)).max())
+        radius = self.config.association.search_radius_m + pos_spread + reach * ang_spread
+        return mean, radius
+
+    def _observe(self, k: int, obs: ObservationSet, log_l: np.ndarray) -> tuple[int, int]:
+        """Associate, update and create landmarks for robot k; adds log likelihoods to log_l."""
+        z, r, desc = self._clean(obs)
+        b = z.shape[0]
+        if b == 0:
+            return 0, 0
+        cfg = self.config.association
+        store = self.landmarks
+        model = self.model
+        dim = model.dim
+        m = self.num_particles
+        if store.size == 0 and store.descriptor_dim != desc.shape[1]:
+            store.allocate(0, desc[:0])
+        if desc.shape[1] != store.descriptor_dim:
+            raise FilterInputError(
+                f"{obs.robot}: descriptor length {desc.shape[1]} differs from the map's "
+                f"{store.descriptor_dim}"
+            )
+        poses = self.poses[:, k]
+        _, r_det = sym_inv_det(r)
+        log_p0 = (
+            np.full(b, cfg.new_landmark_log_likelihood)
+            if cfg.new_landmark_log_likelihood is not None
+            else -0.5 * (cfg.mahalanobis_gate + dim * LOG_2PI + np.log(r_det))
+        )
+
+        mean_pose, radius = self._search_radius(k, z)
+        world, _ = model.inverse(mean_pose, z)
+        cand = store.candidates(world, cfg.max_candidates, radius)  # (B, C)
+        cand, e = self._descriptor_filter(cand, desc)
+        assoc = np.zeros((m, b), bool)
+        vb, vc = np.nonzero(cand >= 0)  # the V (observation, candidate) pairs worth scoring
+        if vb.size:
+            vslots = cand[vb, vc]
+            mu, sig, held = store.gather(
+                np.arange(m)[:, None], vslots[None], ("mean", "cov", "exists")
+            )  # (M, V, ...)
+            maha, _ = model.score(poses[:, None, :], z[vb][None], r[vb][None], mu, sig)
+            ok = held & (maha <= cfg.mahalanobis_gate)
+            cost = np.full((m,) + cand.shape, np.inf)
+            cost[:, vb, vc] = np.where(ok, e[vb, vc][None] + 1e-9 * maha, np.inf)
+            choice = cost.argmin(axis=2)  # (M, B)
+            best_cost = np.take_along_axis(cost, choice[..., None], 2)[..., 0]
+            assoc = np.isfinite(best_cost)
+            if assoc.any() and np.unique(vslots).size < vslots.size:
+                assoc = self._resolve_conflicts(assoc, cand, choice, best_cost)
+            mi, bi = np.nonzero(assoc)
+            if mi.size:
+                pair = np.full(cand.shape, -1, np.int64)
+                pair[vb, vc] = np.arange(vb.size)
+                pv = pair[bi, choice[mi, bi]]
+                slots = vslots[pv]
+                new_mu, new_cov, d_sel, norm_sel = model.update(
+                    poses[mi], z[bi], r[bi], mu[mi, pv], sig[mi, pv]
+                )
+                (count,) = store.gather(mi, slots, ("count",))
+                store.write(mi, slots, mean=new_mu, cov=new_cov, count=count + 1)
+                np.add.at(log_l, mi, -0.5 * (d_sel + norm_sel))
+                store.set_reference(slots, new_mu)
+
+        unassoc = ~assoc
+        log_l += (unassoc * log_p0[None]).sum(axis=1)
+        created = self._create(poses, z, r, desc, unassoc)
+        return int(assoc.sum()), created
+
+    def _descriptor_filter(self, cand: np.ndarray, desc: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Keep the candidates whose descriptor distance E (eq. 16) is at most E0, nearest first.
+
+        The association rule picks the gated candidate of least E and rejects it if E > E0, so a
+        candidate above E0 can never be chosen; dropping it before the per-particle gate gives
+        the same associations at a fraction of the cost. Returns (cand (B, C'), E (B, C')).
+        """
+        e0 = self.config.association.descriptor_gate
+        valid = cand >= 0
+        if desc.shape[1]:
+            e = ((desc[:, None, :] - self.landmarks.descriptor[np.where(valid, cand, 0)]) ** 2).sum(-1)
+        else:
+            e = np.zeros(cand.shape)
+        valid &= e <= e0
+        order = np.argsort(np.where(valid, e, np.inf), axis=1, kind="stable")
+        width = int(valid.sum(axis=1).max(initial=0))
+        cand = np.where(valid, cand, -1)
+        cand = np.take_along_axis(cand, order, 1)[:, :width]
+        e = np.take_along_axis(e, order, 1)[:, :width]
+        return cand, e
+
+    def _resolve_conflicts(
+        self, assoc: np.ndarray, cand: np.ndarray, choice: np.ndarray, cost: np.ndarray
+    ) -> np.ndarray:
+        """Within a particle, one landmark takes at most one observation per update (the cheapest)."""
+        mi, bi = np.nonzero(assoc)
+        slots = cand[bi, choice[mi, bi]]
+        order = np.lexsort((cost[mi, bi], slots, mi))
+        mi_s, sl_s = mi[order], slots[order]
+        dup = np.zeros(order.size, bool)
+        dup[1:] = (mi_s[1:] == mi_s[:-1]) & (sl_s[1:] == sl_s[:-1])
+        if dup.any():
+            self.dropped["duplicate_association"] += int(dup.sum())
+            assoc = assoc.copy()
+            assoc[mi[order][dup], bi[order][dup]] = False
+        return assoc
+
+    def _create(
+        self, poses: np.ndarray, z: np.ndarray, r: np.ndarray, desc: np.ndarray, new: np.ndarray
+    ) -> int:
+        """New landmarks for observations that were not associated: one slot per observation."""
+        store = self.landmarks
+        cols = np.flatnonzero(new.any(axis=0))
+        if cols.size == 0:
+            return 0
+        slots = store.allocate(cols.size, desc[cols])
+        mi, j = np.nonzero(new[:, cols])
+        bi = cols[j]
+        lm, cov = self.model.new_landmark(poses[mi], z[bi], r[bi])
+        store.write(mi, slots[j], mean=lm, cov=cov, exists=True, count=1, score=1)
+        store.set_reference(slots[j], lm)
+        return int(cols.size)
+
+    def _observe_robot(self, k: int, sighting: RobotSighting, log_l: np.ndarray) -> None:
+        """Score a range-bearing sighting of another robot in every particle."""
+        target = self.index.get(sighting.target)
+        z = np.asarray(sighting.z, float)
+        cov = np.asarray(sighting.cov, float)
+        if target is None or target == k:
+            self.dropped["bad_sighting"] += 1
+            return
+        if z.shape != (2,) or cov.shape != (2, 2) or not np.isfinite(z).all():
+            self.dropped["bad_sighting"] += 1
+            return
+        if not is_positive_definite(cov):
+            self.dropped["bad_sighting"] += 1
+            return
+        rb = RangeBearingModel()
+        zhat, _ = rb.predict(self.poses[:, k], self.poses[:, target, :2])
+        nu = rb.innovation(z[None], zhat)
+        inv, det = sym_inv_det(cov)
+        log_l += -0.5 * (quad_form(nu, inv[None]) + 2 * LOG_2PI + np.log(det))
+
+    def _resample(self) -> None:
+        index = low_variance_indices(self.log_w, self.rng)
+        dst, src = copy_plan(index)
+        self.poses[dst] = self.poses[src]
+        self.score[dst] = self.score[src]
+        self.landmarks.copy_rows(dst, src)
+        if self.landmarks.dead_fraction() > 0.5:
+            self.landmarks.compact()
+        self.log_w = np.full(self.num_particles, -np.log(self.num_particles))
+        self.resamples += 1
