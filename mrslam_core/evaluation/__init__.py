@@ -1,0 +1,1 @@
+"""Evaluation: trajectory errors, TUM files, plots and the run report."""

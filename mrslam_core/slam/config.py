@@ -13,18 +13,21 @@ class MotionConfig:
     The relative motion between two odometry poses is decomposed into (rot1, trans, rot2); each
     part gets zero-mean Gaussian noise with variance
     ``alpha1·rot1² + alpha2·trans²`` (rotations) and ``alpha3·trans² + alpha4·(rot1² + rot2²)``
-    (translation), plus a floor ``min_sigma_*`` per step so a still robot keeps some spread.
+    (translation), plus a random walk of density ``sigma_xy_rw`` [m/√s] and ``sigma_theta_rw``
+    [rad/√s] over the update's time span, so noise does not depend on how often a robot updates
+    and a still robot keeps some spread.
     """
 
     alpha1: float = 0.01  # rad²/rad²
     alpha2: float = 0.0025  # rad²/m²
     alpha3: float = 0.0025  # m²/m²
     alpha4: float = 0.0001  # m²/rad²
-    min_sigma_xy: float = 0.0  # m per step
-    min_sigma_theta: float = 0.0  # rad per step
+    min_translation: float = 0.01  # m; below it rot1 = 0 (see motion.decompose)
+    sigma_xy_rw: float = 0.0  # m/√s
+    sigma_theta_rw: float = 0.0  # rad/√s
 
     def __post_init__(self) -> None:
-        for name in ("alpha1", "alpha2", "alpha3", "alpha4", "min_sigma_xy", "min_sigma_theta"):
+        for name in ("alpha1", "alpha2", "alpha3", "alpha4", "min_translation", "sigma_xy_rw", "sigma_theta_rw"):
             if getattr(self, name) < 0:
                 raise ValueError(f"{name} must be >= 0")
 
@@ -38,6 +41,11 @@ class AssociationConfig:
     ``new_landmark_log_likelihood``: log p0, the weight factor of an observation that starts a
     landmark; None derives it from the gate: the likelihood of an innovation at D0 with the
     observation's own covariance.
+    ``descriptor_trust_gate`` (D1 >= D0, or 0 = off): when no candidate passes D0 but one whose
+    descriptor matches (E <= E0) lies within D1, associate with it instead of starting a
+    duplicate landmark. For descriptors that identify a landmark for certain (barcodes), this is
+    association by known correspondence and lets a drifted robot re-localise; for visual
+    descriptors keep it off.
     """
 
     mode: Literal["ml", "hungarian"] = "ml"
@@ -46,6 +54,7 @@ class AssociationConfig:
     new_landmark_log_likelihood: float | None = None
     max_candidates: int = 8
     search_radius_m: float = 1.0
+    descriptor_trust_gate: float = 0.0
 
     def __post_init__(self) -> None:
         if self.mahalanobis_gate <= 0 or self.descriptor_gate < 0:
@@ -60,6 +69,8 @@ class FilterConfig:
 
     Attributes:
         num_particles: M.
+        proposal: ``fastslam1`` samples poses from the motion model (000); ``fastslam2`` from
+            the Gaussian that folds in the step's associated observations (001, Alg. 3).
         observation_model: ``stereo_point`` (3D point in base_link) or ``range_bearing`` (2D).
         resample_threshold: resample when the normalised effective sample size
             (1/Σw²)/M falls below this (000 Alg. 1 line 13).
@@ -69,6 +80,7 @@ class FilterConfig:
     """
 
     num_particles: int = 200
+    proposal: Literal["fastslam1", "fastslam2"] = "fastslam1"
     observation_model: Literal["stereo_point", "range_bearing"] = "stereo_point"
     resample_threshold: float = 0.5
     initial_pose_sigma: tuple[float, float, float] = (0.0, 0.0, 0.0)

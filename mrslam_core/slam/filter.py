@@ -26,7 +26,7 @@ from mrslam_core.linalg import is_positive_definite, quad_form, sym_inv_det
 from mrslam_core.slam.config import FilterConfig
 from mrslam_core.slam.landmarks import LandmarkStore
 from mrslam_core.slam.models import ObservationModel, RangeBearingModel, make_model
-from mrslam_core.slam.motion import sample_motion
+from mrslam_core.slam.motion import predict_motion, sample_motion
 from mrslam_core.slam.resampling import (
     copy_plan,
     effective_sample_fraction,
@@ -148,15 +148,22 @@ class MultiRobotFastSLAM:
             if not self._accept(upd):
                 continue
             k = self.index[upd.robot]
+            last = self.last_stamp.get(upd.robot)
+            dt = 0.0 if last is None else (upd.stamp_ns - last) * 1e-9
             self.last_stamp[upd.robot] = upd.stamp_ns
-            self.poses[:, k] = sample_motion(
-                self.poses[:, k], np.asarray(upd.odometry, float), self.config.motion, self.rng
-            )
+            obs = upd.observations
+            odo = np.asarray(upd.odometry, float)
             log_l = np.zeros(self.num_particles)
-            if upd.observations is not None and len(upd.observations):
-                a, c = self._observe(k, upd.observations, log_l)
-                associated += a
-                created += c
+            if self.config.proposal == "fastslam2" and obs is not None and len(obs):
+                self.poses[:, k], p_x = predict_motion(self.poses[:, k], odo, self.config.motion, dt)
+                a, c = self._observe(k, obs, log_l, p_x)
+            else:
+                self.poses[:, k] = sample_motion(self.poses[:, k], odo, self.config.motion, self.rng, dt)
+                a = c = 0
+                if obs is not None and len(obs):
+                    a, c = self._observe(k, obs, log_l)
+            associated += a
+            created += c
             for sighting in upd.sightings:
                 self._observe_robot(k, sighting, log_l)
             self.log_w = normalise_log_weights(self.log_w + log_l)
@@ -240,11 +247,21 @@ class MultiRobotFastSLAM:
         radius = self.config.association.search_radius_m + pos_spread + reach * ang_spread
         return mean, radius
 
-    def _observe(self, k: int, obs: ObservationSet, log_l: np.ndarray) -> tuple[int, int]:
-        """Associate, update and create landmarks for robot k; adds log likelihoods to log_l."""
+    def _observe(
+        self, k: int, obs: ObservationSet, log_l: np.ndarray, motion_cov: np.ndarray | None = None
+    ) -> tuple[int, int]:
+        """Associate, update and create landmarks for robot k; adds log likelihoods to log_l.
+
+        With ``motion_cov`` (M, 3, 3) the poses of robot k are the noise-free predictions and
+        the pose is drawn from the FastSLAM 2.0 proposal after association; otherwise they are
+        already samples of the motion model (FastSLAM 1.0).
+        """
         z, r, desc = self._clean(obs)
         b = z.shape[0]
         if b == 0:
+            if motion_cov is not None:
+                empty = np.zeros(0, np.int64)
+                self._sample_proposal(k, empty, z, r, z, r, motion_cov, log_l)
             return 0, 0
         cfg = self.config.association
         store = self.landmarks
@@ -268,42 +285,103 @@ class MultiRobotFastSLAM:
 
         mean_pose, radius = self._search_radius(k, z)
         world, _ = model.inverse(mean_pose, z)
-        cand = store.candidates(world, cfg.max_candidates, radius)  # (B, C)
+        cand = store.candidates(world, 4 * cfg.max_candidates, radius)  # (B, 4C), nearest first
         cand, e = self._descriptor_filter(cand, desc)
+        cand, e = cand[:, : cfg.max_candidates], e[:, : cfg.max_candidates]
         assoc = np.zeros((m, b), bool)
+        choice = np.zeros((m, b), np.int64)
+        vslots = np.zeros(0, np.int64)
+        mu = sig = None
         vb, vc = np.nonzero(cand >= 0)  # the V (observation, candidate) pairs worth scoring
         if vb.size:
             vslots = cand[vb, vc]
             mu, sig, held = store.gather(
                 np.arange(m)[:, None], vslots[None], ("mean", "cov", "exists")
             )  # (M, V, ...)
-            maha, _ = model.score(poses[:, None, :], z[vb][None], r[vb][None], mu, sig)
+            p_cov = None if motion_cov is None else motion_cov[:, None]
+            maha, _ = model.score(poses[:, None, :], z[vb][None], r[vb][None], mu, sig, p_cov)
             ok = held & (maha <= cfg.mahalanobis_gate)
+            tier = np.where(ok, e[vb, vc][None] + 1e-9 * maha, np.inf)
+            if cfg.descriptor_trust_gate > cfg.mahalanobis_gate:
+                trusted = held & ~ok & (maha <= cfg.descriptor_trust_gate)
+                tier = np.where(trusted, 1e6 + maha, tier)  # only where no candidate passes D0
             cost = np.full((m,) + cand.shape, np.inf)
-            cost[:, vb, vc] = np.where(ok, e[vb, vc][None] + 1e-9 * maha, np.inf)
+            cost[:, vb, vc] = tier
             choice = cost.argmin(axis=2)  # (M, B)
             best_cost = np.take_along_axis(cost, choice[..., None], 2)[..., 0]
             assoc = np.isfinite(best_cost)
             if assoc.any() and np.unique(vslots).size < vslots.size:
                 assoc = self._resolve_conflicts(assoc, cand, choice, best_cost)
-            mi, bi = np.nonzero(assoc)
-            if mi.size:
-                pair = np.full(cand.shape, -1, np.int64)
-                pair[vb, vc] = np.arange(vb.size)
-                pv = pair[bi, choice[mi, bi]]
-                slots = vslots[pv]
-                new_mu, new_cov, d_sel, norm_sel = model.update(
-                    poses[mi], z[bi], r[bi], mu[mi, pv], sig[mi, pv]
-                )
-                (count,) = store.gather(mi, slots, ("count",))
-                store.write(mi, slots, mean=new_mu, cov=new_cov, count=count + 1)
+        mi, bi = np.nonzero(assoc)
+        if mi.size:
+            pair = np.full(cand.shape, -1, np.int64)
+            pair[vb, vc] = np.arange(vb.size)
+            pv = pair[bi, choice[mi, bi]]
+            slots = vslots[pv]
+            mu_s, sig_s = mu[mi, pv], sig[mi, pv]
+            if motion_cov is not None:
+                poses = self._sample_proposal(k, mi, z[bi], r[bi], mu_s, sig_s, motion_cov, log_l)
+            new_mu, new_cov, d_sel, norm_sel = model.update(poses[mi], z[bi], r[bi], mu_s, sig_s)
+            (count,) = store.gather(mi, slots, ("count",))
+            store.write(mi, slots, mean=new_mu, cov=new_cov, count=count + 1)
+            if motion_cov is None:
                 np.add.at(log_l, mi, -0.5 * (d_sel + norm_sel))
-                store.set_reference(slots, new_mu)
+            store.set_reference(slots, new_mu)
+        elif motion_cov is not None:
+            poses = self._sample_proposal(k, mi, z[:0], r[:0], z[:0], r[:0], motion_cov, log_l)
 
         unassoc = ~assoc
         log_l += (unassoc * log_p0[None]).sum(axis=1)
         created = self._create(poses, z, r, desc, unassoc)
         return int(assoc.sum()), created
+
+    def _sample_proposal(
+        self, k: int, mi: np.ndarray, z: np.ndarray, r: np.ndarray, mu: np.ndarray,
+        sig: np.ndarray, motion_cov: np.ndarray, log_l: np.ndarray,
+    ) -> np.ndarray:
+        """FastSLAM 2.0: draw robot k's pose from the Gaussian that folds in its associated
+        observations, and add the joint marginal log likelihood of those observations.
+
+        The current poses of robot k are the noise-free motion predictions x̂. With
+        Hₓ, Z = G Σ Gᵀ + R and ν = z − ẑ(x̂) of each associated pair (P of them, particle mi):
+        Λ = P⁻¹ + Σ HₓᵀZ⁻¹Hₓ, η = Σ HₓᵀZ⁻¹ν, pose ~ N(x̂ + Λ⁻¹η, Λ⁻¹) (001 Alg. 3, the
+        measurements of one step folded in at once). The weight is the exact marginal
+        N(ν; 0, HₓPHₓᵀ + blockdiag Z): by the determinant lemma and Woodbury,
+        log|S| = Σ log|Z| + log|P| + log|Λ| and νᵀS⁻¹ν = Σ νᵀZ⁻¹ν − ηᵀΛ⁻¹η.
+
+        Returns:
+            the new poses of robot k (M, 3), also written into ``self.poses``.
+        """
+        model = self.model
+        m = self.num_particles
+        x_hat = self.poses[:, k].copy()
+        lam, p_det = sym_inv_det(motion_cov)
+        lam = lam.copy()
+        eta = np.zeros((m, 3))
+        quad = np.zeros(m)
+        if mi.size:
+            zhat, g = model.predict(x_hat[mi], mu)
+            hx = model.pose_jacobian(x_hat[mi], mu)
+            zinv, zdet = sym_inv_det(g @ sig @ np.swapaxes(g, -1, -2) + r)
+            nu = model.innovation(z, zhat)
+            hz = np.swapaxes(hx, -1, -2) @ zinv  # (P, 3, dim)
+            np.add.at(lam, mi, hz @ hx)
+            np.add.at(eta, mi, (hz @ nu[..., None])[..., 0])
+            np.add.at(quad, mi, quad_form(nu, zinv) + model.dim * LOG_2PI + np.log(zdet))
+        cov, _ = sym_inv_det(lam)
+        cov = 0.5 * (cov + np.swapaxes(cov, -1, -2))
+        shift = (cov @ eta[..., None])[..., 0]
+        if mi.size:
+            touched = np.zeros(m, bool)
+            touched[mi] = True
+            _, lam_det = sym_inv_det(lam)
+            ll = -0.5 * (quad - np.einsum("mi,mi->m", eta, shift) + np.log(p_det) + np.log(lam_det))
+            log_l += np.where(touched, ll, 0.0)
+        chol = np.linalg.cholesky(cov + 1e-12 * np.eye(3))
+        new = x_hat + shift + (chol @ self.rng.standard_normal((m, 3, 1)))[..., 0]
+        new[:, 2] = wrap_angle(new[:, 2])
+        self.poses[:, k] = new
+        return new
 
     def _descriptor_filter(self, cand: np.ndarray, desc: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Keep the candidates whose descriptor distance E (eq. 16) is at most E0, nearest first.

@@ -37,6 +37,10 @@ class ObservationModel:
         """z − ẑ with angular components wrapped, (..., dim)."""
         return z - zhat
 
+    def pose_jacobian(self, pose: np.ndarray, landmark: np.ndarray) -> np.ndarray:
+        """Hₓ = ∂g/∂x (..., dim, 3) with respect to the robot pose (x, y, θ)."""
+        raise NotImplementedError
+
     def inverse(self, pose: np.ndarray, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """l = g⁻¹(x, z) (..., dim) and ∂l/∂z = G⁻¹ (..., dim, dim)."""
         raise NotImplementedError
@@ -46,18 +50,23 @@ class ObservationModel:
         lm, ginv = self.inverse(pose, z)
         return lm, ginv @ r @ _t(ginv)
 
-    def score(self, pose, z, r, mu, sig) -> tuple[np.ndarray, np.ndarray]:
+    def score(self, pose, z, r, mu, sig, pose_cov=None) -> tuple[np.ndarray, np.ndarray]:
         """Mahalanobis distance D (eq. 15) and log det(2πZ) for landmark/observation pairs.
 
         Args (leading axes broadcast, e.g. particles × pairs):
             pose: (..., 3); z: (..., dim); r: (..., dim, dim); mu: (..., dim);
-            sig: (..., dim, dim).
+            sig: (..., dim, dim); pose_cov: (..., 3, 3) uncertainty of the pose itself (the
+            FastSLAM 2.0 prediction), added as Hₓ P Hₓᵀ, or None.
 
         Returns:
             (D (...), log det(2π Z) (...)).
         """
         zhat, g = self.predict(pose, mu)
-        zinv, zdet = sym_inv_det(g @ sig @ _t(g) + r)
+        zmat = g @ sig @ _t(g) + r
+        if pose_cov is not None:
+            hx = self.pose_jacobian(pose, mu)
+            zmat = zmat + hx @ pose_cov @ _t(hx)
+        zinv, zdet = sym_inv_det(zmat)
         nu = self.innovation(z, zhat)
         return quad_form(nu, zinv), self.dim * LOG_2PI + np.log(zdet)
 
@@ -119,7 +128,21 @@ class StereoPointModel(ObservationModel):
     def new_landmark(self, pose, z, r):
         return self.to_map(pose, z), rotate_z_sym3(r, pose[..., 2])
 
-    def score(self, pose, z, r, mu, sig):
+    def pose_jacobian(self, pose: np.ndarray, landmark: np.ndarray) -> np.ndarray:
+        zhat, _ = self.predict(pose, landmark)
+        c, s = np.cos(pose[..., 2]), np.sin(pose[..., 2])
+        jac = np.zeros(zhat.shape + (3,))
+        jac[..., 0, 0] = -c
+        jac[..., 0, 1] = -s
+        jac[..., 1, 0] = s
+        jac[..., 1, 1] = -c
+        jac[..., 0, 2] = zhat[..., 1]
+        jac[..., 1, 2] = -zhat[..., 0]
+        return jac
+
+    def score(self, pose, z, r, mu, sig, pose_cov=None):
+        if pose_cov is not None:
+            return super().score(pose, z, r, mu, sig, pose_cov)
         lm = self.to_map(pose, z)
         maha, sdet = inv_quad_det(sig + rotate_z_sym3(r, pose[..., 2]), lm - mu)
         return maha, 3 * LOG_2PI + np.log(sdet)
@@ -169,6 +192,19 @@ class RangeBearingModel(ObservationModel):
         nu = z - zhat
         nu[..., 1] = wrap_angle(nu[..., 1])
         return nu
+
+    def pose_jacobian(self, pose: np.ndarray, landmark: np.ndarray) -> np.ndarray:
+        dx = landmark[..., 0] - pose[..., 0]
+        dy = landmark[..., 1] - pose[..., 1]
+        q = np.maximum(dx * dx + dy * dy, 1e-12)
+        r = np.sqrt(q)
+        jac = np.zeros(dx.shape + (2, 3))
+        jac[..., 0, 0] = -dx / r
+        jac[..., 0, 1] = -dy / r
+        jac[..., 1, 0] = dy / q
+        jac[..., 1, 1] = -dx / q
+        jac[..., 1, 2] = -1.0
+        return jac
 
     def inverse(self, pose: np.ndarray, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         a = pose[..., 2] + z[..., 1]

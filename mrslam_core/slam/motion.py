@@ -8,16 +8,18 @@ from mrslam_core.geometry.se2 import compose, wrap_angle
 from mrslam_core.slam.config import MotionConfig
 
 
-def decompose(delta: np.ndarray) -> tuple[float, float, float]:
+def decompose(delta: np.ndarray, min_translation: float = 0.0) -> tuple[float, float, float]:
     """Relative motion (dx, dy, dθ) in the previous base frame -> (rot1, trans, rot2).
 
     A robot driving backwards gets a negative ``trans`` and a small ``rot1`` instead of a rot1
-    near ±π, so the rotation noise does not explode for reversing.
+    near ±π, so the rotation noise does not explode for reversing. Below ``min_translation`` [m]
+    the direction of travel is meaningless (wheel jitter of a turning or still robot), so rot1 is
+    0 and the whole rotation goes to rot2, as in ROS amcl's odometry model.
     """
     dx, dy, dth = (float(v) for v in delta)
     trans = float(np.hypot(dx, dy))
-    if trans < 1e-9:
-        return 0.0, 0.0, float(wrap_angle(dth))
+    if trans < max(min_translation, 1e-9):
+        return 0.0, trans, float(wrap_angle(dth))
     rot1 = float(np.arctan2(dy, dx))
     if abs(rot1) > np.pi / 2:
         rot1 = float(wrap_angle(rot1 + np.pi))
@@ -26,7 +28,7 @@ def decompose(delta: np.ndarray) -> tuple[float, float, float]:
 
 
 def sample_motion(
-    poses: np.ndarray, delta: np.ndarray, cfg: MotionConfig, rng: np.random.Generator
+    poses: np.ndarray, delta: np.ndarray, cfg: MotionConfig, rng: np.random.Generator, dt: float = 0.0
 ) -> np.ndarray:
     """Move poses (M, 3) by the odometry delta (3,) with sampled noise; returns new (M, 3).
 
@@ -35,8 +37,9 @@ def sample_motion(
         delta: relative motion between two odometry readings, in the earlier base frame.
         cfg: noise parameters.
         rng: random generator.
+        dt: time the motion took [s] (scales the random-walk part of the noise).
     """
-    rot1, trans, rot2 = decompose(delta)
+    rot1, trans, rot2 = decompose(delta, cfg.min_translation)
     m = poses.shape[0]
     s_rot1 = np.sqrt(cfg.alpha1 * rot1**2 + cfg.alpha2 * trans**2)
     s_trans = np.sqrt(cfg.alpha3 * trans**2 + cfg.alpha4 * (rot1**2 + rot2**2))
@@ -46,9 +49,42 @@ def sample_motion(
     tr = trans + s_trans * noise[:, 1]
     r2 = rot2 + s_rot2 * noise[:, 2]
     step = np.stack([tr * np.cos(r1), tr * np.sin(r1), r1 + r2], axis=-1)
-    if cfg.min_sigma_xy > 0 or cfg.min_sigma_theta > 0:
-        floor = rng.standard_normal((m, 3)) * np.array(
-            [cfg.min_sigma_xy, cfg.min_sigma_xy, cfg.min_sigma_theta]
-        )
-        step += floor
+    if dt > 0 and (cfg.sigma_xy_rw > 0 or cfg.sigma_theta_rw > 0):
+        walk = np.array([cfg.sigma_xy_rw, cfg.sigma_xy_rw, cfg.sigma_theta_rw]) * np.sqrt(dt)
+        step += rng.standard_normal((m, 3)) * walk
     return compose(poses, step)
+
+
+def predict_motion(
+    poses: np.ndarray, delta: np.ndarray, cfg: MotionConfig, dt: float = 0.0
+) -> tuple[np.ndarray, np.ndarray]:
+    """Noise-free motion and its Gaussian noise, linearised (the FastSLAM 2.0 prior).
+
+    Args:
+        poses: (M, 3) poses before the motion, map frame.
+        delta: (3,) odometry motion in the earlier base frame.
+        cfg: noise parameters (the same as :func:`sample_motion` draws from).
+        dt: duration of the motion [s].
+
+    Returns:
+        (x̂ (M, 3) = poses ⊕ delta, P (M, 3, 3) covariance of the sampled pose around x̂).
+    """
+    rot1, trans, rot2 = decompose(delta, cfg.min_translation)
+    var = np.array([
+        cfg.alpha1 * rot1**2 + cfg.alpha2 * trans**2,
+        cfg.alpha3 * trans**2 + cfg.alpha4 * (rot1**2 + rot2**2),
+        cfg.alpha1 * rot2**2 + cfg.alpha2 * trans**2,
+    ])
+    th = poses[:, 2] + rot1
+    c, s = np.cos(th), np.sin(th)
+    jac = np.zeros((poses.shape[0], 3, 3))  # ∂(x, y, θ)/∂(rot1, trans, rot2)
+    jac[:, 0, 0] = -trans * s
+    jac[:, 1, 0] = trans * c
+    jac[:, 2, 0] = 1.0
+    jac[:, 0, 1] = c
+    jac[:, 1, 1] = s
+    jac[:, 2, 2] = 1.0
+    cov = (jac * var[None, None, :]) @ np.swapaxes(jac, 1, 2)
+    walk = np.array([cfg.sigma_xy_rw, cfg.sigma_xy_rw, cfg.sigma_theta_rw]) ** 2 * max(dt, 0.0)
+    cov += np.diag(walk + 1e-12)
+    return compose(poses, np.array([trans * np.cos(rot1), trans * np.sin(rot1), rot1 + rot2])), cov

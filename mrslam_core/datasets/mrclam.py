@@ -1,0 +1,134 @@
+"""UTIAS Multi-Robot Cooperative Localization and Mapping (MR.CLAM) datasets.
+
+Leung, Halpern, Barfoot, Liu: "The UTIAS Multi-Robot Cooperative Localization and Mapping
+Dataset", IJRR 2011. Each dataset folder holds, per robot i = 1..5, ``Robot{i}_Odometry.dat``
+(time [s], forward velocity [m/s], angular velocity [rad/s]), ``Robot{i}_Measurement.dat`` (time
+[s], BARCODE, range [m], bearing [rad]) and ``Robot{i}_Groundtruth.dat`` (time [s], x [m], y [m],
+θ [rad], Vicon), plus ``Barcodes.dat`` (subject → barcode: subjects 1–5 are the robots, 6–20 the
+landmarks) and ``Landmark_Groundtruth.dat`` (subject, x, y, σx, σy).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from mrslam_core.geometry.se2 import between, compose, wrap_angle
+from mrslam_core.evaluation.metrics import interpolate_poses
+
+
+class DatasetError(ValueError):
+    """A dataset folder is missing files or holds malformed data."""
+
+
+def read_dat(path: Path, columns: int) -> np.ndarray:
+    """Whitespace-separated numeric table with '#' comments, shape (N, columns)."""
+    if not path.is_file():
+        raise DatasetError(f"missing file {path}")
+    try:
+        data = np.loadtxt(path, comments="#", ndmin=2)
+    except ValueError as exc:
+        raise DatasetError(f"{path}: not a numeric table: {exc}") from exc
+    if data.shape[1] != columns:
+        raise DatasetError(f"{path}: expected {columns} columns, found {data.shape[1]}")
+    return data
+
+
+@dataclass
+class RobotLog:
+    """One robot's logs: odometry (N, 3) t v ω; measurements (K, 4) t subject range bearing;
+    ground truth (G, 4) t x y θ. Times in s."""
+
+    odometry: np.ndarray
+    measurements: np.ndarray
+    groundtruth: np.ndarray
+
+
+class MrclamDataset:
+    """A MR.CLAM dataset folder, parsed.
+
+    Attributes:
+        robots: robot number -> RobotLog (measurement barcodes already mapped to subjects;
+            unknown barcodes are dropped and counted in ``unknown_barcodes``).
+        landmarks: (L, 3) subject, x [m], y [m] ground truth.
+        num_robots: 5.
+    """
+
+    num_robots = 5
+
+    def __init__(self, folder: str | Path):
+        folder = Path(folder)
+        if not folder.is_dir():
+            raise DatasetError(f"not a folder: {folder}")
+        barcodes = read_dat(folder / "Barcodes.dat", 2).astype(int)
+        subject_of = {int(b): int(s) for s, b in barcodes}
+        self.landmarks = read_dat(folder / "Landmark_Groundtruth.dat", 5)[:, :3]
+        self.robots: dict[int, RobotLog] = {}
+        self.unknown_barcodes = 0
+        for i in range(1, self.num_robots + 1):
+            meas = read_dat(folder / f"Robot{i}_Measurement.dat", 4)
+            subj = np.array([subject_of.get(int(b), -1) for b in meas[:, 1]])
+            self.unknown_barcodes += int((subj < 0).sum())
+            meas = meas[subj >= 0].copy()
+            meas[:, 1] = subj[subj >= 0]
+            self.robots[i] = RobotLog(
+                read_dat(folder / f"Robot{i}_Odometry.dat", 3),
+                meas,
+                read_dat(folder / f"Robot{i}_Groundtruth.dat", 4),
+            )
+
+    def time_span(self) -> tuple[float, float]:
+        """Common ground-truth time span (start, end) [s] of all robots."""
+        start = max(r.groundtruth[0, 0] for r in self.robots.values())
+        end = min(r.groundtruth[-1, 0] for r in self.robots.values())
+        return float(start), float(end)
+
+    def groundtruth(self, robot: int, t: np.ndarray) -> np.ndarray:
+        """Ground-truth poses (len(t), 3) of ``robot`` interpolated at times t [s]."""
+        g = self.robots[robot].groundtruth
+        return interpolate_poses(t, g[:, 0], g[:, 1:4])
+
+
+class OdometryIntegrator:
+    """Dead reckoning of one robot from (v, ω) samples, queried at any time.
+
+    Each sample's velocities hold until the next sample (zero before the first). The pose is
+    integrated exactly along arcs and stored at the sample times; queries interpolate between.
+    ``delay`` [s] shifts the samples later (commanded velocities act after a latency).
+    """
+
+    def __init__(self, odometry: np.ndarray, delay: float = 0.0):
+        odo = odometry[np.argsort(odometry[:, 0], kind="stable")]
+        t, v, w = odo[:, 0] + delay, odo[:, 1], odo[:, 2]
+        dt = np.diff(t, append=t[-1])
+        th0 = np.concatenate([[0.0], np.cumsum(w * dt)[:-1]])
+        # exact arc integration of constant (v, ω) over dt, starting at heading th0
+        small = np.abs(w * dt) < 1e-9
+        with np.errstate(divide="ignore", invalid="ignore"):
+            dx = np.where(small, v * dt * np.cos(th0), v / w * (np.sin(th0 + w * dt) - np.sin(th0)))
+            dy = np.where(small, v * dt * np.sin(th0), -v / w * (np.cos(th0 + w * dt) - np.cos(th0)))
+        self.t = t
+        self.poses = np.column_stack(
+            [np.concatenate([[0.0], np.cumsum(dx)[:-1]]), np.concatenate([[0.0], np.cumsum(dy)[:-1]]), th0]
+        )
+
+    def pose(self, t: np.ndarray | float) -> np.ndarray:
+        """Odometry-frame pose(s) at t [s] (clamped to the log's span), (..., 3), θ unwrapped."""
+        tq = np.atleast_1d(np.asarray(t, float))
+        out = np.column_stack([np.interp(tq, self.t, self.poses[:, d]) for d in range(3)])
+        return out if np.ndim(t) else out[0]
+
+    def delta(self, t0: float, t1: float) -> np.ndarray:
+        """Relative motion (3,) from t0 to t1 in the base frame at t0."""
+        p = self.pose(np.array([t0, t1]))
+        d = between(p[0], p[1])
+        d[2] = wrap_angle(p[1, 2] - p[0, 2])
+        return d
+
+    def trajectory(self, start: np.ndarray, t: np.ndarray) -> np.ndarray:
+        """Dead-reckoned map-frame poses (len(t), 3) from ``start`` at t[0]."""
+        p = self.pose(np.asarray(t, float))
+        rel = between(p[:1], p)
+        return compose(start, rel)

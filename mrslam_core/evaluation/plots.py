@@ -1,0 +1,93 @@
+"""Plots of a run: trajectories with ground truth and odometry, the map with covariance ellipses,
+and position error over time. Headless (Agg backend)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+from matplotlib.patches import Ellipse  # noqa: E402
+
+from mrslam_core.evaluation.metrics import position_errors  # noqa: E402
+
+
+def _ellipse(mean: np.ndarray, cov: np.ndarray, nsigma: float = 2.0, **kw) -> Ellipse:
+    vals, vecs = np.linalg.eigh(cov[:2, :2])
+    vals = np.clip(vals, 0, None)
+    angle = np.degrees(np.arctan2(vecs[1, 1], vecs[0, 1]))
+    return Ellipse(mean[:2], 2 * nsigma * np.sqrt(vals[1]), 2 * nsigma * np.sqrt(vals[0]), angle=angle, **kw)
+
+
+def plot_run(out: Path, trajectories: dict, landmarks: dict | None = None, truth_landmarks=None) -> list[Path]:
+    """Write trajectories.png, map.png and errors.png into ``out``; returns their paths.
+
+    Args:
+        trajectories: robot -> {"t": (N,), "est": (N, 3), "gt": (N, 3) or None, "odom": (N, 3) or None}.
+        landmarks: {"mean": (L, dim), "cov": (L, dim, dim)} of the best particle, or None.
+        truth_landmarks: (T, 2) ground-truth landmark positions, or None.
+    """
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    written = []
+
+    fig, ax = plt.subplots(figsize=(9, 7))
+    for i, (name, tr) in enumerate(sorted(trajectories.items())):
+        c = colors[i % len(colors)]
+        if tr.get("gt") is not None:
+            ax.plot(tr["gt"][:, 0], tr["gt"][:, 1], "-", color=c, lw=1.0, alpha=0.5, label=f"{name} truth")
+        if tr.get("odom") is not None:
+            ax.plot(tr["odom"][:, 0], tr["odom"][:, 1], ":", color=c, lw=1.0, label=f"{name} odometry")
+        ax.plot(tr["est"][:, 0], tr["est"][:, 1], "--", color=c, lw=1.4, label=f"{name} estimate")
+    ax.set_aspect("equal")
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    ax.legend(fontsize=7, ncol=2)
+    ax.set_title("Trajectories (map frame)")
+    fig.tight_layout()
+    written.append(out / "trajectories.png")
+    fig.savefig(written[-1], dpi=110)
+    plt.close(fig)
+
+    if landmarks is not None and len(landmarks["mean"]):
+        fig, ax = plt.subplots(figsize=(9, 7))
+        for mean, cov in zip(landmarks["mean"], landmarks["cov"]):
+            ax.add_patch(_ellipse(mean, cov, fill=False, lw=0.6, color="tab:blue"))
+        ax.plot(landmarks["mean"][:, 0], landmarks["mean"][:, 1], "+", color="tab:blue", ms=4, label="landmarks (best particle, 2σ)")
+        if truth_landmarks is not None:
+            ax.plot(truth_landmarks[:, 0], truth_landmarks[:, 1], "kx", ms=6, label="ground truth")
+        for i, (name, tr) in enumerate(sorted(trajectories.items())):
+            ax.plot(tr["est"][:, 0], tr["est"][:, 1], "-", color=colors[i % len(colors)], lw=0.8, alpha=0.6, label=name)
+        ax.set_aspect("equal")
+        ax.autoscale_view()
+        ax.set_xlabel("x [m]")
+        ax.set_ylabel("y [m]")
+        ax.legend(fontsize=7)
+        ax.set_title(f"Map: {len(landmarks['mean'])} landmarks")
+        fig.tight_layout()
+        written.append(out / "map.png")
+        fig.savefig(written[-1], dpi=110)
+        plt.close(fig)
+
+    if any(tr.get("gt") is not None for tr in trajectories.values()):
+        fig, ax = plt.subplots(figsize=(9, 4))
+        for i, (name, tr) in enumerate(sorted(trajectories.items())):
+            if tr.get("gt") is None:
+                continue
+            c = colors[i % len(colors)]
+            t = tr["t"] - tr["t"][0]
+            ax.plot(t, position_errors(tr["est"], tr["gt"]), "-", color=c, lw=1, label=f"{name} estimate")
+            if tr.get("odom") is not None:
+                ax.plot(t, position_errors(tr["odom"], tr["gt"]), ":", color=c, lw=1, label=f"{name} odometry")
+        ax.set_xlabel("time [s]")
+        ax.set_ylabel("position error [m]")
+        ax.legend(fontsize=7, ncol=2)
+        fig.tight_layout()
+        written.append(out / "errors.png")
+        fig.savefig(written[-1], dpi=110)
+        plt.close(fig)
+    return written

@@ -1,0 +1,81 @@
+"""The run folder every command writes: report.json, TUM trajectories, plots, effective config."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from mrslam_core.configio import to_dict, write_yaml
+from mrslam_core.evaluation.metrics import ate_rmse, heading_rmse, rpe_rmse
+from mrslam_core.evaluation.plots import plot_run
+from mrslam_core.evaluation.tum import write_tum
+
+
+def latency_summary(ms: np.ndarray) -> dict[str, float]:
+    """p50, p95, max and mean of step times [ms]."""
+    ms = np.asarray(ms, float)
+    if ms.size == 0:
+        return {"p50": float("nan"), "p95": float("nan"), "max": float("nan"), "mean": float("nan"), "count": 0}
+    return {
+        "p50": float(np.percentile(ms, 50)), "p95": float(np.percentile(ms, 95)),
+        "max": float(ms.max()), "mean": float(ms.mean()), "count": int(ms.size),
+    }
+
+
+def robot_metrics(tr: dict) -> dict[str, float]:
+    """ATE/RPE/heading of estimate and odometry against ground truth at the same stamps."""
+    out: dict[str, float] = {"poses": int(len(tr["t"]))}
+    if tr.get("gt") is None:
+        return out
+    out["ate_rmse_m"] = ate_rmse(tr["est"], tr["gt"])
+    out["rpe_rmse_m"] = rpe_rmse(tr["t"], tr["est"], tr["gt"])
+    out["heading_rmse_rad"] = heading_rmse(tr["est"], tr["gt"])
+    if tr.get("odom") is not None:
+        out["odom_ate_rmse_m"] = ate_rmse(tr["odom"], tr["gt"])
+        out["odom_rpe_rmse_m"] = rpe_rmse(tr["t"], tr["odom"], tr["gt"])
+        out["ate_over_odom"] = out["ate_rmse_m"] / max(out["odom_ate_rmse_m"], 1e-12)
+    return out
+
+
+def write_run(
+    out: str | Path,
+    trajectories: dict[str, dict],
+    config: Any,
+    update_ms: np.ndarray,
+    landmarks: dict | None = None,
+    truth_landmarks: np.ndarray | None = None,
+    extra: dict | None = None,
+    plots: bool = True,
+) -> dict:
+    """Write the run folder and return the report.
+
+    Args:
+        out: folder to write into.
+        trajectories: robot -> {"t": (N,) [s], "est": (N, 3), "gt": (N, 3) | None, "odom": (N, 3) | None}.
+        config: the effective config (a dataclass), written as config.yaml and into the report.
+        update_ms: (S,) central filter step times [ms].
+        landmarks: best particle's map {"mean": (L, dim), "cov": (L, dim, dim)}.
+        truth_landmarks: (T, 2) ground-truth landmark positions for the map plot.
+        extra: more top-level report entries.
+    """
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    for name, tr in trajectories.items():
+        for kind in ("est", "gt", "odom"):
+            if tr.get(kind) is not None:
+                write_tum(out / "trajectories" / f"{name}_{kind}.tum", tr["t"], tr[kind])
+    report = {
+        "robots": {name: robot_metrics(tr) for name, tr in sorted(trajectories.items())},
+        "landmarks": int(len(landmarks["mean"])) if landmarks is not None else 0,
+        "update_ms": latency_summary(update_ms),
+        "config": to_dict(config),
+    }
+    report.update(extra or {})
+    if plots:
+        report["plots"] = [p.name for p in plot_run(out, trajectories, landmarks, truth_landmarks)]
+    write_yaml(config, out / "config.yaml")
+    (out / "report.json").write_text(json.dumps(report, indent=2, default=float))
+    return report

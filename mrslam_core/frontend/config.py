@@ -1,0 +1,128 @@
+"""Configuration of the stereo visual frontend (the only place its defaults are written)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+
+@dataclass(frozen=True)
+class FrontendConfig:
+    """Stereo frontend of 000 (sections 3.2, 4, 6.1): detect, describe, match, triangulate, track.
+
+    Descriptor distances are the squared Euclidean distance (000 eq. 16) between UNIT-norm float
+    vectors, so every type lies in [0, 4] and E0 means the same thing across types (binary ORB
+    strings are mapped to ±1/√256 per bit, so the distance is 4 × the normalised Hamming distance).
+
+    Attributes:
+        detector: ``harris`` (the paper's choice), ``orb`` or ``sift`` (OpenCV).
+        descriptor: ``usurf`` (upright SURF, 64-d, the paper's choice), ``orb`` (256 bits) or
+            ``sift`` (128-d).
+        max_features: detections kept per left image, strongest first.
+        harris_block_size: Harris window [px].
+        harris_k: Harris k.
+        harris_quality: corners weaker than this fraction of the strongest are dropped.
+        nms_radius: non-maximum suppression radius of Harris corners [px].
+        usurf_scale: SURF scale s for detectors without a scale (Harris); window 20s [px].
+        min_disparity: smallest disparity searched [px] (far limit).
+        max_disparity: largest disparity searched [px] (near limit).
+        patch_radius: stereo matching window half-size [px] (window 2r+1 square).
+        uniqueness_ratio: reject a match unless best cost < ratio × second best cost (outside ±1
+            px of the best); cost is 1 − ZNCC.
+        max_match_cost: reject matches whose cost (1 − ZNCC) exceeds this.
+        lr_tolerance: left-right check: the right pixel matched back must land within this
+            distance of the left keypoint [px].
+        discontinuity_tolerance: reject a match when the left or the right half of its window
+            picks an integer disparity further than this from the whole window's [px] (a window
+            across a depth discontinuity: 0 removed most wrong matches on Middlebury).
+        min_texture: a left window whose grey-level standard deviation is below this is skipped.
+        sigma_d: σd of the stereo observation model [px] (000: 1).
+        sigma_r: σr [px] (000: 10).
+        sigma_c: σc [px] (000: 10).
+        min_track_length: publish a point once seen in this many consecutive frames (000: 3).
+        max_observations: B, at most this many observations per frame.
+        grid_cols: image grid columns for spreading the B observations.
+        grid_rows: image grid rows.
+        track_descriptor_gate: E0 for frame-to-frame tracking (squared distance of unit vectors).
+        track_ratio: best/second-best descriptor distance ratio for tracking.
+        track_radius_px: largest image motion of a point between consecutive frames [px].
+        min_depth: points nearer than this along the optical axis are dropped [m].
+        max_depth: points farther than this are dropped [m].
+        obstacle_min_height: lower edge of the obstacle band in base_link z [m].
+        obstacle_max_height: upper edge of the obstacle band in base_link z [m].
+        scan_bins: bearing bins of the pseudo laser scan over the camera's field of view.
+        scan_max_range: range limit of the pseudo scan [m]; bins with no return report inf.
+        obstacle_source: ``dense``: block-matching disparity on a reduced image; ``features``: the
+            matched feature points only.
+        dense_downsample: image reduction factor of the dense obstacle disparity.
+        max_stamp_skew_ns: left/right stamps further apart than this drop the pair [ns].
+        saturated_fraction: an image with more than this fraction of pixels at 0 or 255 is dropped.
+    """
+
+    detector: Literal["harris", "orb", "sift"] = "harris"
+    descriptor: Literal["usurf", "orb", "sift"] = "usurf"
+    max_features: int = 400
+    harris_block_size: int = 3
+    harris_k: float = 0.04
+    harris_quality: float = 0.01
+    nms_radius: int = 4
+    usurf_scale: float = 1.2
+    min_disparity: int = 1
+    max_disparity: int = 64
+    patch_radius: int = 3
+    uniqueness_ratio: float = 0.8
+    max_match_cost: float = 0.3
+    lr_tolerance: float = 1.0
+    discontinuity_tolerance: int = 0
+    min_texture: float = 4.0
+    sigma_d: float = 1.0
+    sigma_r: float = 10.0
+    sigma_c: float = 10.0
+    min_track_length: int = 3
+    max_observations: int = 20
+    grid_cols: int = 5
+    grid_rows: int = 4
+    track_descriptor_gate: float = 0.5
+    track_ratio: float = 0.9
+    track_radius_px: float = 60.0
+    min_depth: float = 0.2
+    max_depth: float = 20.0
+    obstacle_min_height: float = 0.05
+    obstacle_max_height: float = 1.5
+    scan_bins: int = 64
+    scan_max_range: float = 8.0
+    obstacle_source: Literal["dense", "features"] = "dense"
+    dense_downsample: int = 2
+    max_stamp_skew_ns: int = 5_000_000
+    saturated_fraction: float = 0.9
+
+    def __post_init__(self) -> None:
+        positive = (
+            "max_features", "harris_block_size", "usurf_scale", "patch_radius", "sigma_d",
+            "sigma_r", "sigma_c", "min_track_length", "max_observations", "grid_cols",
+            "grid_rows", "track_radius_px", "max_depth", "scan_bins", "scan_max_range",
+            "dense_downsample",
+        )
+        for name in positive:
+            if getattr(self, name) <= 0:
+                raise ValueError(f"{name} must be > 0")
+        if not 0 <= self.min_disparity < self.max_disparity:
+            raise ValueError("need 0 <= min_disparity < max_disparity")
+        if not 0.0 < self.uniqueness_ratio <= 1.0:
+            raise ValueError("uniqueness_ratio must be in (0, 1]")
+        if not 0.0 < self.max_match_cost <= 2.0:
+            raise ValueError("max_match_cost must be in (0, 2] (it is 1 - ZNCC)")
+        if not 0.0 < self.track_ratio <= 1.0:
+            raise ValueError("track_ratio must be in (0, 1]")
+        if not 0.0 <= self.track_descriptor_gate <= 4.0:
+            raise ValueError("track_descriptor_gate must be in [0, 4] (unit descriptors)")
+        if not 0.0 <= self.min_depth < self.max_depth:
+            raise ValueError("need 0 <= min_depth < max_depth")
+        if self.obstacle_min_height >= self.obstacle_max_height:
+            raise ValueError("obstacle_min_height must be below obstacle_max_height")
+        if not 0.0 < self.saturated_fraction <= 1.0:
+            raise ValueError("saturated_fraction must be in (0, 1]")
+        if self.discontinuity_tolerance < 0 or self.lr_tolerance < 0:
+            raise ValueError("discontinuity_tolerance and lr_tolerance must be >= 0")
+        if self.max_stamp_skew_ns < 0:
+            raise ValueError("max_stamp_skew_ns must be >= 0")

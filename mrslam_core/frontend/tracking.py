@@ -1,0 +1,112 @@
+"""Frame-to-frame tracking of stereo points, and the choice of the B observations per frame.
+
+000 section 6.1: only points seen in 3 consecutive frames enter the filter. A point of the current
+frame continues a track of the previous frame when their descriptors are mutual nearest neighbours
+among the previous points within ``track_radius_px`` in the image, with squared distance below
+``track_descriptor_gate`` and a ratio test. A track missed in one frame ends.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from mrslam_core.frontend.config import FrontendConfig
+from mrslam_core.frontend.features import descriptor_distance
+
+
+class Tracker:
+    """Track ids and consecutive-frame counts of the points of successive frames.
+
+    Args:
+        cfg: tracking gates (``track_descriptor_gate``, ``track_ratio``, ``track_radius_px``).
+    """
+
+    def __init__(self, cfg: FrontendConfig):
+        self.cfg = cfg
+        self.next_id = 0
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the previous frame (tracks end; ids keep increasing)."""
+        self._xy = np.zeros((0, 2))
+        self._desc = np.zeros((0, 0), np.float32)
+        self._ids = np.zeros(0, np.int64)
+        self._length = np.zeros(0, np.int64)
+
+    def update(self, xy: np.ndarray, desc: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Associate this frame's points with the previous frame's.
+
+        Args:
+            xy: (N, 2) rectified left-image positions (column, row) [px].
+            desc: (N, D) unit descriptors.
+
+        Returns:
+            (track_ids (N,) int64, length (N,) int64: consecutive frames seen, this one included).
+        """
+        n = xy.shape[0]
+        ids = np.empty(n, np.int64)
+        length = np.ones(n, np.int64)
+        matched = np.zeros(n, bool)
+        t = self._ids.size
+        if n and t and self._desc.shape[1] == desc.shape[1]:
+            dist = descriptor_distance(desc, self._desc)  # (N, T)
+            pix2 = ((xy[:, None, :] - self._xy[None, :, :]) ** 2).sum(axis=2)
+            dist = np.where(pix2 <= self.cfg.track_radius_px**2, dist, np.inf)
+            best = np.argmin(dist, axis=1)
+            d_best = dist[np.arange(n), best]
+            if t > 1:
+                second = np.partition(dist, 1, axis=1)[:, 1]
+            else:
+                second = np.full(n, np.inf)
+            mutual = np.argmin(dist, axis=0)[best] == np.arange(n)
+            matched = (
+                np.isfinite(d_best)
+                & (d_best <= self.cfg.track_descriptor_gate)
+                & (d_best < self.cfg.track_ratio**2 * second)
+                & mutual
+            )
+            ids[matched] = self._ids[best[matched]]
+            length[matched] = self._length[best[matched]] + 1
+        fresh = ~matched
+        ids[fresh] = self.next_id + np.arange(int(fresh.sum()))
+        self.next_id += int(fresh.sum())
+        self._xy = np.asarray(xy, float).copy()
+        self._desc = np.asarray(desc, np.float32).copy()
+        self._ids = ids.copy()
+        self._length = length.copy()
+        return ids, length
+
+
+def select_spread(
+    xy: np.ndarray, strength: np.ndarray, eligible: np.ndarray, k: int,
+    width: int, height: int, cols: int, rows: int,
+) -> np.ndarray:
+    """Indices of at most k eligible points, spread over a cols × rows image grid.
+
+    Round-robin over grid cells: every occupied cell gives its strongest point first, then its
+    second strongest, and so on; within a round, stronger points come first.
+
+    Args:
+        xy: (N, 2) image positions (column, row) [px].
+        strength: (N,) larger is better.
+        eligible: (N,) bool.
+        k: at most this many.
+        width, height: image size [px].
+        cols, rows: grid size.
+
+    Returns:
+        (≤ k,) int64 indices into the N points, in selection order.
+    """
+    idx = np.nonzero(eligible)[0]
+    if idx.size <= k:
+        return idx[np.argsort(-strength[idx], kind="stable")]
+    cx = np.clip((xy[idx, 0] * cols // width).astype(np.int64), 0, cols - 1)
+    cy = np.clip((xy[idx, 1] * rows // height).astype(np.int64), 0, rows - 1)
+    cell = cy * cols + cx
+    order = np.lexsort((-strength[idx], cell))  # by cell, strongest first within a cell
+    cell_sorted = cell[order]
+    first = np.r_[0, np.nonzero(np.diff(cell_sorted))[0] + 1]
+    starts = np.repeat(first, np.diff(np.r_[first, cell_sorted.size]))
+    rank = np.arange(cell_sorted.size) - starts  # rank within the cell
+    pick = np.lexsort((-strength[idx][order], rank))[:k]
+    return idx[order][pick]
