@@ -46,21 +46,55 @@ class AssociationConfig:
     duplicate landmark. For descriptors that identify a landmark for certain (barcodes), this is
     association by known correspondence and lets a drifted robot re-localise; for visual
     descriptors keep it off.
+    ``candidate_search``: landmarks near the observation (a kd-tree over positions, for
+    repetitive visual features) or landmarks whose descriptor is within E0 wherever they are (a
+    kd-tree over descriptors, 002 section III; for identifying descriptors such as barcodes).
+    ``geometry_weight`` w: the ``ml`` rule picks the gated candidate of least
+    E/E0 + w·D/D0; w = 0 is 000's rule (least E), w > 0 breaks near-ties between look-alike
+    landmarks (duplicates, repeated textures) by geometry.
+    ``min_observations`` is NZ_min of 001 (delayed initialisation): a slot is a candidate, not
+    yet a landmark, until it has been associated this many times in a particle; candidates
+    neither shape the pose proposal nor weight the particle (their factor is p0), and the
+    Hungarian mode matches observations to them only after the landmarks (001 III-D).
     """
 
     mode: Literal["ml", "hungarian"] = "ml"
+    candidate_search: Literal["spatial", "descriptor"] = "spatial"
     mahalanobis_gate: float = 11.34  # chi2(3 dof) 0.99
     descriptor_gate: float = 0.5
     new_landmark_log_likelihood: float | None = None
     max_candidates: int = 8
     search_radius_m: float = 1.0
     descriptor_trust_gate: float = 0.0
+    min_observations: int = 1
+    geometry_weight: float = 1.0
 
     def __post_init__(self) -> None:
         if self.mahalanobis_gate <= 0 or self.descriptor_gate < 0:
             raise ValueError("mahalanobis_gate must be > 0 and descriptor_gate >= 0")
         if self.max_candidates < 1:
             raise ValueError("max_candidates must be >= 1")
+
+
+@dataclass(frozen=True)
+class ExistenceConfig:
+    """Existence counter of each landmark (001 section III-F).
+
+    Up by one (to ``max_score``) when the landmark is associated, down by one when it lies in the
+    sensor's footprint at the particle's pose (|bearing| <= fov/2, min_range <= range <=
+    max_range, planar) but was not observed; removed from the particle below zero. Only sound
+    when the frontend reports every feature it sees in that footprint (not a best-B subset).
+    """
+
+    enabled: bool = False
+    fov_rad: float = 1.2
+    min_range: float = 0.3
+    max_range: float = 5.0
+    max_score: int = 5
+
+    def __post_init__(self) -> None:
+        if not 0 < self.fov_rad <= 2 * 3.141592653589793 or self.max_range <= self.min_range:
+            raise ValueError("existence footprint: need 0 < fov_rad <= 2π and max_range > min_range")
 
 
 @dataclass(frozen=True)
@@ -77,6 +111,9 @@ class FilterConfig:
         initial_pose_sigma: (σx [m], σy [m], σθ [rad]) of the Gaussian the particles start in
             around each robot's known start pose.
         seed: random generator seed.
+        sighting_outlier_probability: ε of the robust robot-to-robot likelihood
+            (1 − ε)·N(z; ẑ, R) + ε·U, with U uniform over range 0–10 m and bearing ±π, so one
+            misread barcode cannot wipe out the particles that are right.
     """
 
     num_particles: int = 200
@@ -85,9 +122,11 @@ class FilterConfig:
     resample_threshold: float = 0.5
     initial_pose_sigma: tuple[float, float, float] = (0.0, 0.0, 0.0)
     seed: int = 0
+    sighting_outlier_probability: float = 0.0
     initial_capacity: int = 256
     motion: MotionConfig = field(default_factory=MotionConfig)
     association: AssociationConfig = field(default_factory=AssociationConfig)
+    existence: ExistenceConfig = field(default_factory=ExistenceConfig)
 
     def __post_init__(self) -> None:
         if self.num_particles < 1:

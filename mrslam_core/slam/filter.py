@@ -23,6 +23,7 @@ import numpy as np
 
 from mrslam_core.geometry.se2 import wrap_angle
 from mrslam_core.linalg import is_positive_definite, quad_form, sym_inv_det
+from mrslam_core.slam.association import associate_hungarian, associate_ml, resolve_conflicts
 from mrslam_core.slam.config import FilterConfig
 from mrslam_core.slam.landmarks import LandmarkStore
 from mrslam_core.slam.models import ObservationModel, RangeBearingModel, make_model
@@ -128,6 +129,7 @@ class MultiRobotFastSLAM:
         self.dropped: Counter[str] = Counter()
         self.steps = 0
         self.resamples = 0
+        self.removed_landmarks = 0
 
     # ------------------------------------------------------------------ public API
     @property
@@ -285,50 +287,65 @@ class MultiRobotFastSLAM:
 
         mean_pose, radius = self._search_radius(k, z)
         world, _ = model.inverse(mean_pose, z)
-        cand = store.candidates(world, 4 * cfg.max_candidates, radius)  # (B, 4C), nearest first
+        if cfg.candidate_search == "descriptor":
+            cand = store.descriptor_candidates(desc, 4 * cfg.max_candidates, cfg.descriptor_gate)
+        else:
+            cand = store.candidates(world, 4 * cfg.max_candidates, radius)  # (B, 4C), nearest first
         cand, e = self._descriptor_filter(cand, desc)
         cand, e = cand[:, : cfg.max_candidates], e[:, : cfg.max_candidates]
-        assoc = np.zeros((m, b), bool)
-        choice = np.zeros((m, b), np.int64)
-        vslots = np.zeros(0, np.int64)
-        mu = sig = None
+        pair = np.full((m, b), -1, np.int64)
         vb, vc = np.nonzero(cand >= 0)  # the V (observation, candidate) pairs worth scoring
+        vslots = cand[vb, vc]
         if vb.size:
-            vslots = cand[vb, vc]
-            mu, sig, held = store.gather(
-                np.arange(m)[:, None], vslots[None], ("mean", "cov", "exists")
-            )  # (M, V, ...)
+            mu, sig, held, count = store.gather(np.arange(m)[:, None], vslots[None])  # (M, V, ...)
             p_cov = None if motion_cov is None else motion_cov[:, None]
-            maha, _ = model.score(poses[:, None, :], z[vb][None], r[vb][None], mu, sig, p_cov)
-            ok = held & (maha <= cfg.mahalanobis_gate)
-            tier = np.where(ok, e[vb, vc][None] + 1e-9 * maha, np.inf)
-            if cfg.descriptor_trust_gate > cfg.mahalanobis_gate:
-                trusted = held & ~ok & (maha <= cfg.descriptor_trust_gate)
-                tier = np.where(trusted, 1e6 + maha, tier)  # only where no candidate passes D0
-            cost = np.full((m,) + cand.shape, np.inf)
-            cost[:, vb, vc] = tier
-            choice = cost.argmin(axis=2)  # (M, B)
-            best_cost = np.take_along_axis(cost, choice[..., None], 2)[..., 0]
-            assoc = np.isfinite(best_cost)
-            if assoc.any() and np.unique(vslots).size < vslots.size:
-                assoc = self._resolve_conflicts(assoc, cand, choice, best_cost)
+            maha, log_norm = model.score(poses[:, None, :], z[vb][None], r[vb][None], mu, sig, p_cov)
+            confirmed = count >= cfg.min_observations
+            feasible = held & (maha <= cfg.mahalanobis_gate)
+            if cfg.mode == "ml":
+                geo = cfg.geometry_weight * cfg.descriptor_gate / cfg.mahalanobis_gate
+                cost = np.where(feasible, e[vb, vc][None] + (geo + 1e-9) * maha, np.inf)
+                cost = np.where(feasible & ~confirmed, cost + 1e3, cost)  # landmarks first
+                if cfg.descriptor_trust_gate > cfg.mahalanobis_gate:
+                    trusted = held & ~feasible & (maha <= cfg.descriptor_trust_gate)
+                    cost = np.where(trusted, 1e6 + maha, cost)  # only where nothing passes D0
+                pair = associate_ml(cost, vb, vc, b, cand.shape[1])
+                pair, n = resolve_conflicts(pair, vslots, cost)
+                if n:
+                    self.dropped["duplicate_association"] += n
+            else:
+                ll = np.where(feasible, -0.5 * (maha + log_norm), -np.inf)
+                pair = associate_hungarian(np.where(confirmed, ll, -np.inf), vb, vslots, log_p0)
+                left = (pair < 0)[:, vb]
+                if (left & ~confirmed & feasible).any():  # leftovers against candidates (001 III-D)
+                    second = associate_hungarian(np.where(left & ~confirmed, ll, -np.inf), vb, vslots, log_p0)
+                    pair = np.where(pair >= 0, pair, second)
+
+        assoc = pair >= 0
         mi, bi = np.nonzero(assoc)
         if mi.size:
-            pair = np.full(cand.shape, -1, np.int64)
-            pair[vb, vc] = np.arange(vb.size)
-            pv = pair[bi, choice[mi, bi]]
+            pv = pair[mi, bi]
             slots = vslots[pv]
+            conf = confirmed[mi, pv]
             mu_s, sig_s = mu[mi, pv], sig[mi, pv]
             if motion_cov is not None:
-                poses = self._sample_proposal(k, mi, z[bi], r[bi], mu_s, sig_s, motion_cov, log_l)
+                poses = self._sample_proposal(
+                    k, mi[conf], z[bi[conf]], r[bi[conf]], mu_s[conf], sig_s[conf], motion_cov, log_l
+                )
             new_mu, new_cov, d_sel, norm_sel = model.update(poses[mi], z[bi], r[bi], mu_s, sig_s)
-            (count,) = store.gather(mi, slots, ("count",))
-            store.write(mi, slots, mean=new_mu, cov=new_cov, count=count + 1)
+            (score,) = store.gather(mi, slots, ("score",))
+            store.write(
+                mi, slots, mean=new_mu, cov=new_cov, count=count[mi, pv] + 1,
+                score=np.minimum(score + 1, self.config.existence.max_score),
+            )
             if motion_cov is None:
-                np.add.at(log_l, mi, -0.5 * (d_sel + norm_sel))
+                np.add.at(log_l, mi[conf], -0.5 * (d_sel[conf] + norm_sel[conf]))
+            np.add.at(log_l, mi[~conf], log_p0[bi[~conf]])
             store.set_reference(slots, new_mu)
         elif motion_cov is not None:
             poses = self._sample_proposal(k, mi, z[:0], r[:0], z[:0], r[:0], motion_cov, log_l)
+        if self.config.existence.enabled:
+            self._update_existence(poses, mean_pose, radius, mi, vslots[pair[mi, bi]] if mi.size else mi)
 
         unassoc = ~assoc
         log_l += (unassoc * log_p0[None]).sum(axis=1)
@@ -404,21 +421,40 @@ class MultiRobotFastSLAM:
         e = np.take_along_axis(e, order, 1)[:, :width]
         return cand, e
 
-    def _resolve_conflicts(
-        self, assoc: np.ndarray, cand: np.ndarray, choice: np.ndarray, cost: np.ndarray
-    ) -> np.ndarray:
-        """Within a particle, one landmark takes at most one observation per update (the cheapest)."""
-        mi, bi = np.nonzero(assoc)
-        slots = cand[bi, choice[mi, bi]]
-        order = np.lexsort((cost[mi, bi], slots, mi))
-        mi_s, sl_s = mi[order], slots[order]
-        dup = np.zeros(order.size, bool)
-        dup[1:] = (mi_s[1:] == mi_s[:-1]) & (sl_s[1:] == sl_s[:-1])
-        if dup.any():
-            self.dropped["duplicate_association"] += int(dup.sum())
-            assoc = assoc.copy()
-            assoc[mi[order][dup], bi[order][dup]] = False
-        return assoc
+    def _update_existence(
+        self, poses: np.ndarray, mean_pose: np.ndarray, radius: float, mi: np.ndarray, seen_slots: np.ndarray
+    ) -> None:
+        """Existence counters (001 III-F): landmarks in the footprint but not seen lose a point."""
+        ex = self.config.existence
+        store = self.landmarks
+        tree = store.tree()
+        if tree is None:
+            return
+        center = np.zeros(store.dim)
+        center[:2] = mean_pose[:2]
+        reach = ex.max_range + radius + (3.0 if store.dim == 3 else 0.0)
+        slots = np.sort(store._live[tree.query_ball_point(center, reach)])
+        if slots.size == 0:
+            return
+        m = self.num_particles
+        mean, held, score = store.gather(np.arange(m)[:, None], slots[None], ("mean", "exists", "score"))
+        dx = mean[..., 0] - poses[:, None, 0]
+        dy = mean[..., 1] - poses[:, None, 1]
+        c, s = np.cos(poses[:, None, 2]), np.sin(poses[:, None, 2])
+        xb, yb = c * dx + s * dy, -s * dx + c * dy
+        rng = np.hypot(xb, yb)
+        visible = held & (rng >= ex.min_range) & (rng <= ex.max_range)
+        visible &= np.abs(np.arctan2(yb, xb)) <= ex.fov_rad / 2
+        if mi.size:
+            pos = np.searchsorted(slots, seen_slots)
+            ok = (pos < slots.size) & (slots[np.minimum(pos, slots.size - 1)] == seen_slots)
+            visible[mi[ok], pos[ok]] = False
+        pm, ps = np.nonzero(visible)
+        if pm.size == 0:
+            return
+        new_score = score[pm, ps] - 1
+        store.write(pm, slots[ps], score=new_score, exists=new_score >= 0)
+        self.removed_landmarks += int((new_score < 0).sum())
 
     def _create(
         self, poses: np.ndarray, z: np.ndarray, r: np.ndarray, desc: np.ndarray, new: np.ndarray
@@ -454,7 +490,11 @@ class MultiRobotFastSLAM:
         zhat, _ = rb.predict(self.poses[:, k], self.poses[:, target, :2])
         nu = rb.innovation(z[None], zhat)
         inv, det = sym_inv_det(cov)
-        log_l += -0.5 * (quad_form(nu, inv[None]) + 2 * LOG_2PI + np.log(det))
+        ll = -0.5 * (quad_form(nu, inv[None]) + 2 * LOG_2PI + np.log(det))
+        eps = self.config.sighting_outlier_probability
+        if eps > 0:
+            ll = np.logaddexp(np.log1p(-eps) + ll, np.log(eps) - np.log(10.0 * 2 * np.pi))
+        log_l += ll
 
     def _resample(self) -> None:
         index = low_variance_indices(self.log_w, self.rng)

@@ -59,6 +59,8 @@ class LandmarkStore:
         self.ref = np.full((cap, dim), np.inf)
         self._tree: cKDTree | None = None
         self._live = np.zeros(0, np.int64)
+        self._dtree: cKDTree | None = None
+        self._dlive = np.zeros(0, np.int64)
         self._grow_pool(max(cap // chunk, 1) * 2)
 
     # ------------------------------------------------------------------ sizes
@@ -193,6 +195,7 @@ class LandmarkStore:
         ref[n == 0] = np.inf
         self.ref[slots] = ref
         self._tree = None
+        self._dtree = None
 
     def set_reference(self, slots: np.ndarray, means: np.ndarray) -> None:
         """Reference positions from values just written: per slot, the mean of ``means`` (P, dim)
@@ -204,6 +207,29 @@ class LandmarkStore:
         ref = np.stack([np.bincount(inv, means[:, d], uniq.size) for d in range(self.dim)], -1)
         self.ref[uniq] = ref / n[:, None]
         self._tree = None
+        self._dtree = None
+
+    def descriptor_candidates(self, desc: np.ndarray, k: int, max_sq_dist: float) -> np.ndarray:
+        """Up to ``k`` live slots whose descriptor is within squared distance ``max_sq_dist``
+        of each row of ``desc`` (B, D), nearest first: the kd-tree over descriptors of 002
+        section III, so association cost grows with log N.
+
+        Returns:
+            (B, k) slot indices, -1 where there are fewer.
+        """
+        if self._dtree is None:
+            self._dlive = np.flatnonzero(np.isfinite(self.ref[: self.size, 0]))
+            self._dtree = cKDTree(self.descriptor[self._dlive]) if self._dlive.size else None
+        out = np.full((desc.shape[0], k), -1, np.int64)
+        if self._dtree is None or desc.shape[0] == 0:
+            return out
+        kk = min(k, self._dlive.size)
+        dist, idx = self._dtree.query(desc, k=kk, distance_upper_bound=np.sqrt(max_sq_dist) + 1e-9)
+        if kk == 1:
+            dist, idx = dist[:, None], idx[:, None]
+        ok = np.isfinite(dist)
+        out[:, :kk][ok] = self._dlive[idx[ok]]
+        return out
 
     def tree(self) -> cKDTree | None:
         """A kd-tree over the live slots' reference positions (rebuilt only after changes)."""
@@ -288,6 +314,7 @@ class LandmarkStore:
         self.ref[live.size : self.size] = np.inf
         self.size = live.size
         self._tree = None
+        self._dtree = None
         return remap
 
     def particle_map(self, m: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:

@@ -1,0 +1,120 @@
+"""The multi-robot filter: seeded runs on the synthetic stereo world with error bounds, the
+shared map, resampling without aliasing, and bad input that never corrupts the state."""
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from mrslam_core.datasets.synthetic import SyntheticWorld, SyntheticWorldConfig
+from mrslam_core.slam.config import AssociationConfig, FilterConfig
+from mrslam_core.slam.filter import FilterInputError, MultiRobotFastSLAM, RobotUpdate
+from mrslam_core.types import ObservationSet, RobotSighting
+
+WORLD = SyntheticWorldConfig(seed=1, sigma_d=1.0, sigma_r=10.0, sigma_c=10.0)
+
+
+def run(world_cfg: SyntheticWorldConfig, filter_cfg: FilterConfig, steps: int):
+    world = SyntheticWorld(world_cfg)
+    slam = MultiRobotFastSLAM(filter_cfg, world.robots, world.start_poses())
+    est_err, odo_err = [], []
+    for _, true, odom, updates in world.run(steps):
+        slam.step(updates)
+        est_err.append(np.linalg.norm(slam.estimate().poses[:, :2] - true[:, :2], axis=1))
+        odo_err.append(np.linalg.norm(odom[:, :2] - true[:, :2], axis=1))
+    rmse = lambda e: np.sqrt(np.mean(np.square(e), axis=0))  # noqa: E731
+    return slam, world, rmse(est_err), rmse(odo_err)
+
+
+@pytest.mark.parametrize("proposal", ["fastslam1", "fastslam2"])
+def test_three_robots_beat_odometry_and_map_is_accurate(proposal):
+    slam, world, est, odo = run(WORLD, FilterConfig(num_particles=100, seed=2, proposal=proposal), 150)
+    assert np.all(est < 0.5 * odo), (est, odo)
+    assert np.all(est < 0.25), est
+    slots, mean, _, _, counts = slam.best_map()
+    # landmarks seen at least 3 times sit within 0.3 m of a true landmark
+    d = np.linalg.norm(mean[counts >= 3][:, None] - world.landmarks[None], axis=2).min(axis=1)
+    assert np.median(d) < 0.15 and np.mean(d < 0.3) > 0.9
+
+
+def test_robots_share_one_map():
+    # robot2 follows robot1's loop later: it must re-observe landmarks robot1 created
+    slam, world, _, _ = run(replace(WORLD, num_robots=2), FilterConfig(num_particles=50, seed=3), 60)
+    best = slam.best_particle()
+    assert slam.landmarks.size > 0
+    counts = slam.landmarks.gather(np.full(slam.landmarks.size, best), np.arange(slam.landmarks.size), ("count",))[0]
+    assert (counts >= 5).sum() > 50  # many landmarks carry repeated (team) observations
+
+
+def test_resampling_copies_without_aliasing():
+    slam, _, _, _ = run(WORLD, FilterConfig(num_particles=30, seed=4, resample_threshold=1.0), 5)
+    assert slam.resamples > 0
+    store = slam.landmarks
+    slots = np.arange(store.size)
+    before = store.gather(np.arange(30)[:, None], slots[None], ("mean",))[0].copy()
+    # write into particle 0 only: no other particle may change
+    store.write(np.zeros(store.size, int), slots, mean=np.full((store.size, 3), 123.0))
+    after = store.gather(np.arange(30)[:, None], slots[None], ("mean",))[0]
+    assert np.all(after[0] == 123.0)
+    np.testing.assert_array_equal(after[1:], before[1:])
+
+
+def _obs(robot, stamp, z, cov=None, desc=None):
+    z = np.asarray(z, float)
+    cov = np.broadcast_to(np.eye(3) * 0.01, (len(z), 3, 3)) if cov is None else cov
+    desc = np.ones((len(z), 4), np.float32) / 2 if desc is None else desc
+    return ObservationSet(robot, stamp, z, cov, desc)
+
+
+def _state(slam):
+    return (slam.poses.copy(), slam.log_w.copy(), slam.landmarks.size, slam.landmarks.table.copy())
+
+
+def test_bad_input_is_dropped_and_counted_without_corrupting_state():
+    slam = MultiRobotFastSLAM(FilterConfig(num_particles=10), ["a", "b"], np.zeros((2, 3)))
+    slam.step([RobotUpdate("a", 1, np.zeros(3), _obs("a", 1, [[2.0, 0.0, 1.0]]))])
+    snap = _state(slam)
+    slam.step([RobotUpdate("ghost", 2, np.zeros(3))])  # unknown robot
+    slam.step([RobotUpdate("a", 2, np.array([np.nan, 0, 0]))])  # NaN odometry
+    slam.step([RobotUpdate("a", 1, np.zeros(3))])  # stamp not newer
+    slam.step([RobotUpdate("a", 1, np.zeros(3))])  # duplicate stamp
+    for got, want in zip(_state(slam), snap):
+        np.testing.assert_array_equal(got, want)
+    assert slam.dropped == {"unknown_robot": 1, "bad_odometry": 1, "stale_stamp": 2}
+    # rows with NaN/inf or a non-positive-definite covariance are dropped, the rest is used
+    bad_cov = np.stack([np.eye(3) * 0.01, -np.eye(3), np.eye(3) * 0.01])
+    slam.step([RobotUpdate("a", 3, np.zeros(3), _obs("a", 3, [[2.0, 0, 1], [1, 1, 1], [np.inf, 0, 0]], bad_cov))])
+    assert slam.dropped["bad_observation"] == 2
+    assert np.isfinite(slam.poses).all() and np.isfinite(slam.log_w).all()
+    # an empty observation set is a pure motion update
+    slam.step([RobotUpdate("b", 4, np.array([0.1, 0, 0]), _obs("b", 4, np.zeros((0, 3))))])
+    # a wrong measurement dimension is a programming error: a clear exception
+    with pytest.raises(FilterInputError, match="dimension"):
+        slam.step([RobotUpdate("a", 5, np.zeros(3), ObservationSet("a", 5, np.zeros((1, 2)), np.eye(2)[None]))])
+
+
+def test_robot_sightings_pull_particles_together():
+    cfg = FilterConfig(num_particles=200, seed=5, initial_pose_sigma=(0.3, 0.3, 0.0),
+                       observation_model="range_bearing")
+    slam = MultiRobotFastSLAM(cfg, ["a", "b"], np.array([[0.0, 0, 0], [2.0, 0, 0]]))
+    cov = np.diag([0.01, 0.001])
+    for t in range(1, 6):
+        slam.step([RobotUpdate("a", t, np.zeros(3), sightings=[RobotSighting("a", "b", np.array([2.0, 0.0]), cov)])])
+    rel = slam.poses[:, 1, :2] - slam.poses[:, 0, :2]
+    w = np.exp(slam.log_w)
+    assert np.linalg.norm(w @ rel - [2.0, 0.0]) < 0.1
+    slam.step([RobotUpdate("a", 9, np.zeros(3), sightings=[RobotSighting("a", "zz", np.array([1.0, 0]), cov)])])
+    assert slam.dropped["bad_sighting"] == 1
+
+
+def test_hungarian_mode_runs_and_beats_odometry():
+    cfg = FilterConfig(num_particles=40, seed=6, association=AssociationConfig(mode="hungarian"))
+    _, _, est, odo = run(WORLD, cfg, 80)
+    assert np.all(est < odo)
+
+
+def test_config_validation():
+    with pytest.raises(ValueError):
+        FilterConfig(num_particles=0)
+    with pytest.raises(FilterInputError):
+        MultiRobotFastSLAM(FilterConfig(), ["a", "a"], np.zeros((2, 3)))

@@ -1,0 +1,64 @@
+"""MR.CLAM dataset 6: reader, dead reckoning, and the joint filter's accuracy against Vicon."""
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from mrslam_core.datasets.mrclam import DatasetError, MrclamDataset, OdometryIntegrator
+from mrslam_core.evaluation.report import robot_metrics
+from mrslam_core.pipelines.mrclam import MrclamConfig, run
+
+
+def test_arc_integration_is_exact():
+    # v = 1 m/s, ω = π/2 rad/s for 1 s: a quarter circle of radius 2/π
+    odo = np.array([[0.0, 1.0, np.pi / 2], [1.0, 0.0, 0.0]])
+    integ = OdometryIntegrator(odo)
+    r = 2 / np.pi
+    np.testing.assert_allclose(integ.pose(1.0), [r, r, np.pi / 2], atol=1e-12)
+    np.testing.assert_allclose(integ.delta(0.0, 1.0), [r, r, np.pi / 2], atol=1e-12)
+    # a delay shifts the motion later
+    late = OdometryIntegrator(odo, delay=0.5)
+    np.testing.assert_allclose(late.pose(0.5), [0.0, 0.0, 0.0], atol=1e-12)
+
+
+def test_missing_folder_is_a_clear_error(tmp_path):
+    with pytest.raises(DatasetError, match="missing file"):
+        MrclamDataset(tmp_path)
+
+
+def test_reader_maps_barcodes_to_subjects(mrclam6):
+    ds = MrclamDataset(mrclam6)
+    assert ds.landmarks.shape == (15, 3)
+    subjects = np.concatenate([r.measurements[:, 1] for r in ds.robots.values()])
+    assert set(np.unique(subjects).astype(int)) <= set(range(1, 21))
+    assert ds.unknown_barcodes == 6  # barcodes not in Barcodes.dat, dropped and counted
+    t0, t1 = ds.time_span()
+    assert 770 < t1 - t0 < 775
+
+
+def test_short_run_writes_consistent_metrics(mrclam6):
+    ds = MrclamDataset(mrclam6)
+    cfg = MrclamConfig(duration=60.0)
+    cfg = replace(cfg, filter=replace(cfg.filter, num_particles=100))
+    res = run(ds, cfg)
+    for tr in res["trajectories"].values():
+        m = robot_metrics(tr)
+        assert m["ate_rmse_m"] < 0.3
+        np.testing.assert_allclose(tr["est"][0], tr["gt"][0], atol=1e-9)  # known start poses
+
+
+@pytest.mark.slow
+def test_joint_filter_accuracy_on_dataset6(mrclam6):
+    """docs/results.md, MR.CLAM table: the default config, seed 0, all 772 s."""
+    ds = MrclamDataset(mrclam6)
+    joint = run(ds, MrclamConfig())
+    ate = {n: robot_metrics(tr) for n, tr in joint["trajectories"].items()}
+    for name, m in ate.items():
+        assert m["ate_rmse_m"] <= 0.45, (name, m)
+        assert m["ate_over_odom"] <= 0.30, (name, m)
+    mean_joint = np.mean([m["ate_rmse_m"] for m in ate.values()])
+    assert mean_joint <= 0.30
+    indep = run(ds, replace(MrclamConfig(), mode="independent"))
+    mean_indep = np.mean([robot_metrics(tr)["ate_rmse_m"] for tr in indep["trajectories"].values()])
+    assert mean_joint < mean_indep

@@ -1,0 +1,74 @@
+"""Run folder: TUM round trip, metrics against hand-computed values, config YAML strictness."""
+
+import json
+
+import numpy as np
+import pytest
+
+from mrslam_core.configio import ConfigError, from_dict, load_yaml, to_dict
+from mrslam_core.evaluation.metrics import ate_rmse, interpolate_poses, rpe_rmse
+from mrslam_core.evaluation.report import write_run
+from mrslam_core.evaluation.tum import read_tum, write_tum
+from mrslam_core.pipelines.mrclam import MrclamConfig
+from mrslam_core.slam.config import FilterConfig
+
+
+def test_tum_round_trip(tmp_path):
+    t = np.array([0.0, 0.5, 1.0])
+    poses = np.array([[0.0, 0.0, 0.0], [1.0, 2.0, 1.0], [-1.0, 0.5, -3.0]])
+    write_tum(tmp_path / "a.tum", t, poses)
+    t2, p2 = read_tum(tmp_path / "a.tum")
+    np.testing.assert_allclose(t2, t)
+    np.testing.assert_allclose(p2, poses, atol=1e-6)
+    first = (tmp_path / "a.tum").read_text().splitlines()[0].split()
+    assert len(first) == 8 and first[7] == "1.000000000"  # qw of yaw 0
+
+
+def test_metrics_hand_computed():
+    gt = np.zeros((4, 3))
+    est = np.array([[3.0, 4.0, 0], [0, 0, 0], [0, 0, 0], [0, 0, 0]])
+    assert ate_rmse(est, gt) == pytest.approx(2.5)  # sqrt(25 / 4)
+    t = np.arange(4.0)
+    gt = np.column_stack([t, np.zeros(4), np.zeros(4)])
+    est = np.column_stack([1.1 * t, np.zeros(4), np.zeros(4)])  # 10 % scale error
+    assert rpe_rmse(t, est, gt, delta=1.0) == pytest.approx(0.1)
+    np.testing.assert_allclose(interpolate_poses(np.array([0.5]), t, gt), [[0.5, 0, 0]])
+
+
+def test_write_run(tmp_path):
+    t = np.arange(5.0)
+    gt = np.column_stack([t, t, np.zeros(5)])
+    tr = {"robot1": {"t": t, "est": gt + [0.1, 0, 0], "gt": gt, "odom": gt + [0.3, 0, 0]}}
+    rep = write_run(tmp_path, tr, FilterConfig(), np.array([1.0, 2.0, 3.0]),
+                    {"mean": np.zeros((1, 3)), "cov": np.eye(3)[None]})
+    saved = json.loads((tmp_path / "report.json").read_text())
+    assert saved["robots"]["robot1"]["ate_rmse_m"] == pytest.approx(0.1)
+    assert saved["robots"]["robot1"]["odom_ate_rmse_m"] == pytest.approx(0.3)
+    assert saved["update_ms"]["p50"] == 2.0 and saved["landmarks"] == 1
+    for f in ("robot1_est.tum", "robot1_gt.tum", "robot1_odom.tum"):
+        assert (tmp_path / "trajectories" / f).is_file()
+    assert {"trajectories.png", "map.png", "errors.png"} <= set(rep["plots"])
+    assert from_dict(FilterConfig, saved["config"]) == FilterConfig()
+
+
+def test_config_errors_name_the_key(tmp_path):
+    with pytest.raises(ConfigError, match="unknown key filter.motion.alpha9"):
+        from_dict(MrclamConfig, {"filter": {"motion": {"alpha9": 1}}})
+    with pytest.raises(ConfigError, match="filter.num_particles: expected an integer"):
+        from_dict(MrclamConfig, {"filter": {"num_particles": "many"}})
+    with pytest.raises(ConfigError, match="mode: expected one of"):
+        from_dict(MrclamConfig, {"mode": "solo"})
+    bad = tmp_path / "x.yaml"
+    bad.write_text("filter: [1, 2\n")
+    with pytest.raises(ConfigError, match="not valid YAML"):
+        load_yaml(MrclamConfig, bad)
+    cfg = from_dict(MrclamConfig, {"robots": [1, 2], "filter": {"initial_pose_sigma": [0.1, 0.1, 0.01]}})
+    assert cfg.robots == (1, 2) and cfg.filter.initial_pose_sigma == (0.1, 0.1, 0.01)
+    assert from_dict(MrclamConfig, to_dict(cfg)) == cfg
+
+
+def test_shipped_config_files_load():
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[2] / "config"
+    assert load_yaml(MrclamConfig, root / "mrclam.yaml").mode == "joint"
