@@ -46,6 +46,10 @@ class SyntheticWorldConfig:
     sigma_c: float = 1.0
     max_observations: int = 20
     odometry_noise: MotionConfig = field(default_factory=MotionConfig)
+    cluster_size: int = 1  # landmarks per cluster (ambiguous worlds: > 1)
+    cluster_spread: float = 0.0  # m, σ of landmarks around their cluster centre
+    descriptor_pool: int = 0  # distinct descriptors shared by all landmarks (0: all distinct)
+    fov: float | None = None  # rad, horizontal field of view limit (None: the image's)
     seed: int = 0
 
 
@@ -56,15 +60,19 @@ class SyntheticWorld:
         self.cfg = cfg
         rng = np.random.default_rng(cfg.seed)
         n = cfg.num_landmarks
-        self.landmarks = np.column_stack(
+        centres = np.column_stack(
             [
-                rng.uniform(0, cfg.width, n),
-                rng.uniform(0, cfg.height, n),
-                rng.uniform(*cfg.landmark_z, n),
+                rng.uniform(0, cfg.width, -(-n // cfg.cluster_size)),
+                rng.uniform(0, cfg.height, -(-n // cfg.cluster_size)),
+                rng.uniform(*cfg.landmark_z, -(-n // cfg.cluster_size)),
             ]
         )
-        d = rng.standard_normal((n, cfg.descriptor_dim))
-        self.descriptors = (d / np.linalg.norm(d, axis=1, keepdims=True)).astype(np.float32)
+        self.landmarks = np.repeat(centres, cfg.cluster_size, axis=0)[:n]
+        self.landmarks += cfg.cluster_spread * rng.standard_normal((n, 3))
+        pool = cfg.descriptor_pool or n
+        d = rng.standard_normal((pool, cfg.descriptor_dim))
+        d = (d / np.linalg.norm(d, axis=1, keepdims=True)).astype(np.float32)
+        self.descriptors = d[rng.integers(0, pool, n)] if cfg.descriptor_pool else d
         self.robots = [f"robot{i + 1}" for i in range(cfg.num_robots)]
         self.rng = np.random.default_rng(cfg.seed + 1)
 
@@ -97,6 +105,7 @@ class SyntheticWorld:
         vis = (
             (optical[:, 2] > cfg.min_range)
             & (rng_xy < cfg.max_range)
+            & (np.abs(np.arctan2(base[:, 1], base[:, 0])) <= (cfg.fov or 2 * np.pi) / 2)
             & (rcd[:, 1] >= 0) & (rcd[:, 1] < w) & (rcd[:, 0] >= 0) & (rcd[:, 0] < h)
         )
         idx = np.flatnonzero(vis)

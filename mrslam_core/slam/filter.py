@@ -220,7 +220,7 @@ class MultiRobotFastSLAM:
             return False
         return True
 
-    def _clean(self, obs: ObservationSet) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def _clean(self, obs: ObservationSet) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         dim = self.model.dim
         if obs.z.shape[1] != dim:
             raise FilterInputError(
@@ -231,7 +231,7 @@ class MultiRobotFastSLAM:
         ok &= np.isfinite(obs.descriptors).all(axis=1)
         if (~ok).any():
             self.dropped["bad_observation"] += int((~ok).sum())
-        return obs.z[ok], obs.cov[ok], obs.descriptors[ok]
+        return obs.z[ok], obs.cov[ok], obs.descriptors[ok], obs.track_ids[ok]
 
     def _search_radius(self, k: int, z: np.ndarray) -> tuple[np.ndarray, float]:
         """Mean pose of robot k and a radius that covers every particle's view of the batch."""
@@ -258,7 +258,7 @@ class MultiRobotFastSLAM:
         the pose is drawn from the FastSLAM 2.0 proposal after association; otherwise they are
         already samples of the motion model (FastSLAM 1.0).
         """
-        z, r, desc = self._clean(obs)
+        z, r, desc, tracks = self._clean(obs)
         b = z.shape[0]
         if b == 0:
             if motion_cov is not None:
@@ -349,7 +349,7 @@ class MultiRobotFastSLAM:
 
         unassoc = ~assoc
         log_l += (unassoc * log_p0[None]).sum(axis=1)
-        created = self._create(poses, z, r, desc, unassoc)
+        created = self._create(poses, z, r, desc, tracks, unassoc)
         return int(assoc.sum()), created
 
     def _sample_proposal(
@@ -457,7 +457,8 @@ class MultiRobotFastSLAM:
         self.removed_landmarks += int((new_score < 0).sum())
 
     def _create(
-        self, poses: np.ndarray, z: np.ndarray, r: np.ndarray, desc: np.ndarray, new: np.ndarray
+        self, poses: np.ndarray, z: np.ndarray, r: np.ndarray, desc: np.ndarray, tracks: np.ndarray,
+        new: np.ndarray,
     ) -> int:
         """New landmarks for observations that were not associated: one slot per observation."""
         store = self.landmarks
@@ -465,6 +466,7 @@ class MultiRobotFastSLAM:
         if cols.size == 0:
             return 0
         slots = store.allocate(cols.size, desc[cols])
+        store.origin[slots] = tracks[cols]
         mi, j = np.nonzero(new[:, cols])
         bi = cols[j]
         lm, cov = self.model.new_landmark(poses[mi], z[bi], r[bi])

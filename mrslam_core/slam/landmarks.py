@@ -37,6 +37,7 @@ class LandmarkStore:
         refcount: (P,) particles whose table names each pool chunk (0 = free).
         descriptor: (cap, D) float32 per slot.
         ref: (cap, dim) reference position of each slot for the spatial index [m] (inf: none).
+        origin: (cap,) track id of the observation that created each slot (-1: unknown).
         size: slots in use (0..size-1).
     """
 
@@ -57,6 +58,7 @@ class LandmarkStore:
         cap = max(int(capacity), 1)
         self.descriptor = np.zeros((cap, descriptor_dim), np.float32)
         self.ref = np.full((cap, dim), np.inf)
+        self.origin = np.full(cap, -1, np.int64)
         self._tree: cKDTree | None = None
         self._live = np.zeros(0, np.int64)
         self._dtree: cKDTree | None = None
@@ -136,7 +138,9 @@ class LandmarkStore:
             desc[: self.descriptor.shape[0]] = self.descriptor
             ref = np.full((cap, self.dim), np.inf)
             ref[: self.ref.shape[0]] = self.ref
-            self.descriptor, self.ref = desc, ref
+            origin = np.full(cap, -1, np.int64)
+            origin[: self.origin.size] = self.origin
+            self.descriptor, self.ref, self.origin = desc, ref, origin
         cols_needed = -(-self.size // self.chunk)
         if cols_needed > self.columns:
             add = cols_needed - self.columns
@@ -311,6 +315,7 @@ class LandmarkStore:
         self.table = new_table
         self.descriptor[: live.size] = self.descriptor[live]
         self.ref[: live.size] = self.ref[live]
+        self.origin[: live.size] = self.origin[live]
         self.ref[live.size : self.size] = np.inf
         self.size = live.size
         self._tree = None
