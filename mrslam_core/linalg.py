@@ -114,3 +114,25 @@ def rotate_z_sym3(a: np.ndarray, theta: np.ndarray) -> np.ndarray:
     out[..., 1, 2] = out[..., 2, 1] = s * axz + c * ayz
     out[..., 2, 2] = np.broadcast_to(azz, shape)
     return out
+
+
+def sym3_kalman(sig: np.ndarray, s: np.ndarray, diff: np.ndarray):
+    """Kalman step with H = I for stacks of 3×3 symmetric Σ (…, 3, 3), S = Σ + R and innovation
+    ν (…, 3): returns (Σ S⁻¹ ν, Σ − Σ S⁻¹ Σ, νᵀ S⁻¹ ν, det S), written out entry by entry
+    (about three times faster than batched matmul for small matrices)."""
+    a, det = sym_inv_det(s)
+    # T = Σ · S⁻¹ (general 3×3)
+    t = np.empty_like(sig)
+    for i in range(3):
+        for j in range(3):
+            t[..., i, j] = sig[..., i, 0] * a[..., 0, j] + sig[..., i, 1] * a[..., 1, j] + sig[..., i, 2] * a[..., 2, j]
+    shift = np.stack(
+        [t[..., i, 0] * diff[..., 0] + t[..., i, 1] * diff[..., 1] + t[..., i, 2] * diff[..., 2] for i in range(3)], -1
+    )
+    new = np.empty_like(sig)
+    for i in range(3):
+        for j in range(i, 3):
+            v = sig[..., i, j] - (t[..., i, 0] * sig[..., 0, j] + t[..., i, 1] * sig[..., 1, j] + t[..., i, 2] * sig[..., 2, j])
+            new[..., i, j] = v
+            new[..., j, i] = v
+    return shift, new, quad_form(diff, a), det

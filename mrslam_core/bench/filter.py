@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from mrslam_core.datasets.synthetic import SyntheticWorld, SyntheticWorldConfig
-from mrslam_core.slam.config import FilterConfig
+from mrslam_core.slam.config import AssociationConfig, FilterConfig
 from mrslam_core.slam.filter import MultiRobotFastSLAM
 
 
@@ -37,7 +37,8 @@ def prefill(slam: MultiRobotFastSLAM, world: SyntheticWorld, sigma: float, seed:
 
 
 def time_steps(
-    particles: int, robots: int, landmarks: int, per_robot: int, steps: int, seed: int = 0
+    particles: int, robots: int, landmarks: int, per_robot: int, steps: int, seed: int = 0,
+    association: str = "ml", proposal: str = "fastslam1",
 ) -> dict:
     """Mean/p50/p95/max ms of a team step and the landmark store's memory."""
     area = landmarks / 2.0  # two landmarks per m², as in an indoor scene with a 20-feature image
@@ -49,7 +50,10 @@ def time_steps(
         )
     )
     slam = MultiRobotFastSLAM(
-        FilterConfig(num_particles=particles, seed=seed, initial_capacity=landmarks + 1024),
+        FilterConfig(
+            num_particles=particles, seed=seed, initial_capacity=landmarks + 1024, proposal=proposal,
+            association=AssociationConfig(mode=association),
+        ),
         world.robots, world.start_poses(),
     )
     prefill(slam, world, 0.05, seed)
@@ -65,6 +69,7 @@ def time_steps(
     t = np.array(times)
     return {
         "particles": particles, "robots": robots, "landmarks": landmarks,
+        "association": association, "proposal": proposal,
         "observations_per_robot": per_robot, "steps": steps,
         "mean_ms": float(t.mean()), "p50_ms": float(np.percentile(t, 50)),
         "p95_ms": float(np.percentile(t, 95)), "max_ms": float(t.max()),
@@ -81,19 +86,22 @@ def main(argv: list[str]) -> int:
     ap.add_argument("--landmarks", type=int, default=2000)
     ap.add_argument("--observations", type=int, default=20)
     ap.add_argument("--steps", type=int, default=30)
+    ap.add_argument("--association", choices=["ml", "hungarian"], default="ml")
+    ap.add_argument("--proposal", choices=["fastslam1", "fastslam2"], default="fastslam1")
     ap.add_argument("--sweep", action="store_true", help="also sweep M and map size")
     ap.add_argument("--out", default="runs/bench")
     args = ap.parse_args(argv)
 
     def show(r: dict) -> None:
         print(
-            f"M={r['particles']:5d} K={r['robots']} N={r['landmarks']:6d} B={r['observations_per_robot']:3d}"
+            f"{r['association']:9s} {r['proposal']}  M={r['particles']:5d} K={r['robots']} N={r['landmarks']:6d} B={r['observations_per_robot']:3d}"
             f"  step mean {r['mean_ms']:7.1f} ms  p50 {r['p50_ms']:7.1f}  p95 {r['p95_ms']:7.1f}"
             f"  max {r['max_ms']:7.1f}  resample {r['resample_rate']:.2f}/step"
             f"  store {r['store_mb']:7.1f} MB  peak RSS {r['peak_rss_mb']:7.0f} MB", flush=True
         )
 
-    results = {"headline": time_steps(args.particles, args.robots, args.landmarks, args.observations, args.steps)}
+    results = {"headline": time_steps(args.particles, args.robots, args.landmarks, args.observations,
+                                      args.steps, association=args.association, proposal=args.proposal)}
     show(results["headline"])
     if args.sweep:
         results["vs_particles"] = []

@@ -297,7 +297,9 @@ class MultiRobotFastSLAM:
         vb, vc = np.nonzero(cand >= 0)  # the V (observation, candidate) pairs worth scoring
         vslots = cand[vb, vc]
         if vb.size:
-            mu, sig, held, count = store.gather(np.arange(m)[:, None], vslots[None])  # (M, V, ...)
+            mu, sig, held, count, score = store.gather(
+                np.arange(m)[:, None], vslots[None], ("mean", "cov", "exists", "count", "score")
+            )  # (M, V, ...)
             p_cov = None if motion_cov is None else motion_cov[:, None]
             maha, log_norm = model.score(poses[:, None, :], z[vb][None], r[vb][None], mu, sig, p_cov)
             confirmed = count >= cfg.min_observations
@@ -310,9 +312,10 @@ class MultiRobotFastSLAM:
                     trusted = held & ~feasible & (maha <= cfg.descriptor_trust_gate)
                     cost = np.where(trusted, 1e6 + maha, cost)  # only where nothing passes D0
                 pair = associate_ml(cost, vb, vc, b, cand.shape[1])
-                pair, n = resolve_conflicts(pair, vslots, cost)
-                if n:
-                    self.dropped["duplicate_association"] += n
+                if np.unique(vslots).size < vslots.size:  # else no two observations share a slot
+                    pair, n = resolve_conflicts(pair, vslots, cost)
+                    if n:
+                        self.dropped["duplicate_association"] += n
             else:
                 ll = np.where(feasible, -0.5 * (maha + log_norm), -np.inf)
                 pair = associate_hungarian(np.where(confirmed, ll, -np.inf), vb, vslots, log_p0)
@@ -333,14 +336,14 @@ class MultiRobotFastSLAM:
                     k, mi[conf], z[bi[conf]], r[bi[conf]], mu_s[conf], sig_s[conf], motion_cov, log_l
                 )
             new_mu, new_cov, d_sel, norm_sel = model.update(poses[mi], z[bi], r[bi], mu_s, sig_s)
-            (score,) = store.gather(mi, slots, ("score",))
             store.write(
                 mi, slots, mean=new_mu, cov=new_cov, count=count[mi, pv] + 1,
-                score=np.minimum(score + 1, self.config.existence.max_score),
+                score=np.minimum(score[mi, pv] + 1, self.config.existence.max_score),
             )
             if motion_cov is None:
-                np.add.at(log_l, mi[conf], -0.5 * (d_sel[conf] + norm_sel[conf]))
-            np.add.at(log_l, mi[~conf], log_p0[bi[~conf]])
+                log_l += np.bincount(mi[conf], -0.5 * (d_sel[conf] + norm_sel[conf]), m)
+            if (~conf).any():
+                log_l += np.bincount(mi[~conf], log_p0[bi[~conf]], m)
             store.set_reference(slots, new_mu)
         elif motion_cov is not None:
             poses = self._sample_proposal(k, mi, z[:0], r[:0], z[:0], r[:0], motion_cov, log_l)
@@ -504,7 +507,7 @@ class MultiRobotFastSLAM:
         self.poses[dst] = self.poses[src]
         self.score[dst] = self.score[src]
         self.landmarks.copy_rows(dst, src)
-        if self.landmarks.dead_fraction() > 0.5:
+        if self.resamples % 8 == 0 and self.landmarks.dead_fraction() > 0.5:
             self.landmarks.compact()
         self.log_w = np.full(self.num_particles, -np.log(self.num_particles))
         self.resamples += 1

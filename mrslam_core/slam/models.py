@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from mrslam_core.geometry.se2 import wrap_angle
-from mrslam_core.linalg import inv_quad_det, quad_form, rotate_z_sym3, sym_inv_det
+from mrslam_core.linalg import inv_quad_det, quad_form, rotate_z_sym3, sym3_kalman, sym_inv_det
 
 LOG_2PI = float(np.log(2.0 * np.pi))
 
@@ -149,13 +149,8 @@ class StereoPointModel(ObservationModel):
 
     def update(self, pose, z, r, mu, sig):
         lm = self.to_map(pose, z)
-        sinv, sdet = sym_inv_det(sig + rotate_z_sym3(r, pose[..., 2]))
-        diff = lm - mu
-        gain = sig @ sinv
-        new_mu = mu + (gain @ diff[..., None])[..., 0]
-        new_sig = sig - gain @ sig
-        new_sig = 0.5 * (new_sig + _t(new_sig))
-        return new_mu, new_sig, quad_form(diff, sinv), 3 * LOG_2PI + np.log(sdet)
+        shift, new_sig, maha, sdet = sym3_kalman(sig, sig + rotate_z_sym3(r, pose[..., 2]), lm - mu)
+        return mu + shift, new_sig, maha, 3 * LOG_2PI + np.log(sdet)
 
     @staticmethod
     def _rot(theta: np.ndarray) -> np.ndarray:

@@ -118,3 +118,34 @@ def test_config_validation():
         FilterConfig(num_particles=0)
     with pytest.raises(FilterInputError):
         MultiRobotFastSLAM(FilterConfig(), ["a", "a"], np.zeros((2, 3)))
+
+
+def test_spurious_landmarks_disappear_with_the_existence_counter():
+    from mrslam_core.slam.config import ExistenceConfig
+
+    cfg = FilterConfig(
+        num_particles=20, seed=7,
+        existence=ExistenceConfig(enabled=True, fov_rad=1.2, min_range=0.3, max_range=6.0, max_score=3),
+    )
+    real = np.array([[3.0, 0.0, 1.0], [3.0, 1.0, 1.0]])
+    slam = MultiRobotFastSLAM(cfg, ["a"], np.zeros((1, 3)))
+    desc = np.eye(3, 8, dtype=np.float32)
+    # one frame with a spurious third point, then 10 frames of only the two real points
+    slam.step([RobotUpdate("a", 1, np.zeros(3), _obs("a", 1, np.vstack([real, [[4.0, -1.0, 1.0]]]), desc=desc))])
+    assert slam.landmarks.size == 3
+    for t in range(2, 12):
+        slam.step([RobotUpdate("a", t, np.zeros(3), _obs("a", t, real, desc=desc[:2]))])
+    _, mean, _, _, _ = slam.best_map()
+    assert len(mean) == 2  # the spurious landmark was in view, unseen, and removed
+    np.testing.assert_allclose(np.sort(mean[:, 1]), [0.0, 1.0], atol=0.05)
+    assert slam.removed_landmarks == 20  # once in each particle
+
+
+def test_delayed_initialisation_keeps_candidates_out_of_the_weights():
+    cfg = FilterConfig(num_particles=10, seed=8, association=AssociationConfig(min_observations=3))
+    slam = MultiRobotFastSLAM(cfg, ["a"], np.zeros((1, 3)))
+    pt = np.array([[3.0, 0.5, 1.0]])
+    for t in range(1, 5):
+        slam.step([RobotUpdate("a", t, np.zeros(3), _obs("a", t, pt))])
+    (count,) = slam.landmarks.gather(np.zeros(1, int), np.zeros(1, int), ("count",))
+    assert slam.landmarks.size == 1 and count[0] == 4  # one slot, promoted after 3 observations
