@@ -4,6 +4,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 OUT    ?= runs/demo
+DATA   ?= ../shared/data
 
 .PHONY: venv demo test bench clean
 
@@ -15,8 +16,9 @@ $(STAMP): pyproject.toml
 	$(PY) -m pip install --quiet -e ".[ros,test]"
 	touch $(STAMP)
 
+# Until the simulated team lands, the main job is the joint filter on real multi-robot data.
 demo: venv
-	$(VENV)/bin/mrslam demo --out $(OUT)
+	$(VENV)/bin/mrslam mrclam $(DATA)/mrclam/dataset6 --out $(OUT)
 	@echo "report: $(OUT)/report.json"
 
 test: venv
