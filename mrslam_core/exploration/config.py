@@ -1,0 +1,68 @@
+"""Configuration of mapping and exploration (the only place its defaults are written)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class GridConfig:
+    """Log-odds occupancy grid.
+
+    Attributes:
+        resolution: cell side [m].
+        size: (x, y) extent [m], the grid covers [origin, origin + size).
+        origin: (x, y) of the grid's lower-left corner in the map frame [m].
+        hit, miss: log-odds added for a beam end (obstacle) / a cell a beam passed.
+        clamp: log-odds are kept in [-clamp, clamp].
+        free_below, occupied_above: probability thresholds of free and occupied cells.
+    """
+
+    resolution: float = 0.1
+    size: tuple[float, float] = (22.0, 14.0)
+    origin: tuple[float, float] = (-1.0, -1.0)
+    hit: float = 0.85
+    miss: float = -0.7
+    clamp: float = 4.0
+    free_below: float = 0.4
+    occupied_above: float = 0.65
+
+
+@dataclass(frozen=True)
+class ExplorationConfig:
+    """Frontier exploration (002 section V after Burgard et al. 2005).
+
+    Attributes:
+        coordinated: discount the utility of targets near already assigned ones (eq. 8–9);
+            False sends every robot to its own best frontier.
+        beta: weight of the travel cost V in argmax(U − β·V).
+        utility_range: max_range of the discount P(d) = 1 − d/max_range [m].
+        occ_max: cells with occupancy probability above this are not traversable.
+        min_frontier_cells: smaller frontier groups are ignored.
+        robot_radius: obstacles are inflated by this for planning [m].
+        min_target_distance: frontier targets closer than this to the robot are skipped (the
+            unknown just behind a robot with a forward-looking sensor is not worth a goal) [m].
+        goal_tolerance: a goal counts as reached within this distance [m].
+        replan_period: re-assign targets at least this often [s].
+        progress_timeout: a goal with no progress for this long is blacklisted [s].
+        blacklist_radius: frontier cells within this of a blacklisted goal are skipped [m].
+        return_to_start: drive back to the start pose once exploration is complete.
+        max_speed, max_turn_rate: path follower limits [m/s, rad/s].
+        lookahead: pure-pursuit lookahead distance [m].
+    """
+
+    coordinated: bool = True
+    beta: float = 1.0
+    utility_range: float = 4.0
+    occ_max: float = 0.65
+    min_frontier_cells: int = 5
+    robot_radius: float = 0.35
+    min_target_distance: float = 1.0
+    goal_tolerance: float = 0.4
+    replan_period: float = 4.0
+    progress_timeout: float = 8.0
+    blacklist_radius: float = 0.5
+    return_to_start: bool = False
+    max_speed: float = 0.5
+    max_turn_rate: float = 1.2
+    lookahead: float = 0.4

@@ -1,0 +1,147 @@
+"""The central exploration agent: frontiers, costs, coordinated assignment, paths, progress."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from enum import Enum
+
+import numpy as np
+
+from mrslam_core.exploration.assignment import assign_targets
+from mrslam_core.exploration.config import ExplorationConfig
+from mrslam_core.exploration.cost import travel_cost
+from mrslam_core.exploration.frontiers import frontier_cells, frontier_groups, frontier_targets
+from mrslam_core.exploration.grid import OccupancyGrid
+from mrslam_core.exploration.planning import astar, inflate, pure_pursuit
+
+
+class State(Enum):
+    EXPLORING = "exploring"
+    RETURNING = "returning"
+    COMPLETE = "complete"
+
+
+@dataclass
+class Goal:
+    """A robot's current goal: target (x, y) [m] and path (N, 2) [m]."""
+
+    target: np.ndarray
+    path: np.ndarray
+    assigned_s: float
+
+
+@dataclass
+class Explorer:
+    """Coordinated frontier exploration for robots ``robots`` (002 section V).
+
+    Call :meth:`step` with the current grid, every robot's pose (map frame) and the time; it
+    (re)assigns targets when due and returns each robot's (v, ω) command.
+    """
+
+    config: ExplorationConfig
+    robots: list[str]
+    starts: dict[str, np.ndarray] = field(default_factory=dict)
+    goals: dict[str, Goal | None] = field(default_factory=dict)
+    blacklist: list[np.ndarray] = field(default_factory=list)
+    state: State = State.EXPLORING
+    last_plan_s: float = -np.inf
+    plans: int = 0
+    checkpoints: dict[str, tuple[np.ndarray, float]] = field(default_factory=dict)
+
+    def _replan(self, grid: OccupancyGrid, poses: dict[str, np.ndarray], now: float) -> None:
+        cfg = self.config
+        prob = grid.probability()
+        free, known = grid.free(), grid.observed
+        frontier = frontier_cells(free, known)
+        if self.blacklist:
+            centres = grid.centre_of(np.argwhere(frontier))
+            bad = np.zeros(len(centres), bool)
+            for b in self.blacklist:
+                bad |= np.linalg.norm(centres - b, axis=1) < cfg.blacklist_radius
+            fc = np.argwhere(frontier)[bad]
+            frontier[fc[:, 0], fc[:, 1]] = False
+        self.plans += 1
+        self.last_plan_s = now
+        passable = ~inflate(grid.occupied(), cfg.robot_radius / grid.res)
+        # a frontier the robot cannot stand on (hugging a wall) is not a goal
+        groups = frontier_groups(frontier & passable, cfg.min_frontier_cells)
+        if not groups and free.any():
+            if self.state is State.EXPLORING:
+                self.state = State.RETURNING if cfg.return_to_start else State.COMPLETE
+            if self.state is State.RETURNING:
+                for name in self.robots:
+                    self._set_goal(name, self.starts[name][:2], grid, passable, poses, now)
+            return
+        if not groups:
+            return
+        targets = frontier_targets(groups, max(1, int(round(1.0 / grid.res))))
+        cells = np.array([grid.cell_of(poses[n][:2]) for n in self.robots])
+        cells = np.clip(cells, 0, np.array(grid.shape) - 1)
+        cost = travel_cost(prob, cells, cfg.occ_max, grid.res)[:, targets[:, 0], targets[:, 1]]
+        txy = grid.centre_of(targets)
+        for i, name in enumerate(self.robots):
+            near = np.linalg.norm(txy - poses[name][:2], axis=1) < cfg.min_target_distance
+            cost[i, near] = np.inf
+        chosen = assign_targets(txy, cost, cfg.beta, cfg.utility_range, cfg.coordinated)
+        for name, j in zip(self.robots, chosen):
+            if j < 0:
+                self.goals[name] = None
+            else:
+                self._set_goal(name, txy[j], grid, passable, poses, now)
+
+    def _set_goal(self, name, target, grid, passable, poses, now) -> None:
+        start = tuple(np.clip(grid.cell_of(poses[name][:2]), 0, np.array(grid.shape) - 1))
+        goal = tuple(np.clip(grid.cell_of(target), 0, np.array(grid.shape) - 1))
+        # a robot standing closer than its radius to an obstacle may leave through inflated
+        # cells around it (never through occupied ones)
+        rr, cc = np.ogrid[: grid.shape[0], : grid.shape[1]]
+        near = (rr - start[0]) ** 2 + (cc - start[1]) ** 2 <= (self.config.robot_radius / grid.res + 2) ** 2
+        path = astar(passable | (near & ~grid.occupied()), start, goal)
+        if path is None:
+            self.blacklist.append(np.asarray(target, float))
+            self.goals[name] = None
+            return
+        path_xy = grid.centre_of(np.array(path))
+        self.goals[name] = Goal(np.asarray(target, float), path_xy, now)
+
+    def step(self, grid: OccupancyGrid, poses: dict[str, np.ndarray], now: float) -> dict[str, tuple[float, float]]:
+        """Commands (v [m/s], ω [rad/s]) per robot at time ``now`` [s]."""
+        cfg = self.config
+        for name in self.robots:
+            self.starts.setdefault(name, np.asarray(poses[name], float).copy())
+        due = now - self.last_plan_s >= cfg.replan_period
+        for name in self.robots:
+            g = self.goals.get(name)
+            if g is None:
+                due = True
+                continue
+            d = float(np.linalg.norm(poses[name][:2] - g.target))
+            where, since = self.checkpoints.setdefault(name, (poses[name][:2].copy(), now))
+            if d < cfg.goal_tolerance:
+                due = True
+                self.goals[name] = None
+            elif np.linalg.norm(poses[name][:2] - where) > 0.3:
+                self.checkpoints[name] = (poses[name][:2].copy(), now)
+            elif now - since > cfg.progress_timeout:
+                # no headway for a while (blocked, or oscillating): never chase this goal again
+                self.blacklist.append(g.target)
+                self.goals[name] = None
+                self.checkpoints[name] = (poses[name][:2].copy(), now)
+                due = True
+        if due and self.state is not State.COMPLETE:
+            grid_ok = grid.observed.any()
+            if grid_ok:
+                self._replan(grid, poses, now)
+        commands = {}
+        for name in self.robots:
+            g = self.goals.get(name)
+            if g is None or self.state is State.COMPLETE:
+                commands[name] = (0.0, 0.0)
+                continue
+            v, w, _ = pure_pursuit(poses[name], g.path, cfg.lookahead, cfg.max_speed, cfg.max_turn_rate)
+            commands[name] = (v, w)
+        if self.state is State.RETURNING and all(
+            np.linalg.norm(poses[n][:2] - self.starts[n][:2]) < cfg.goal_tolerance for n in self.robots
+        ):
+            self.state = State.COMPLETE
+        return commands

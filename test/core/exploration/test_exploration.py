@@ -1,0 +1,93 @@
+"""Exploration: value-iteration cost against the paper's update rule, frontiers, assignment,
+A*, the occupancy grid, and a seeded 2D run that explores and stops."""
+
+import numpy as np
+import pytest
+
+from mrslam_core.exploration.assignment import assign_targets
+from mrslam_core.exploration.config import ExplorationConfig, GridConfig
+from mrslam_core.exploration.cost import travel_cost, value_iteration_reference
+from mrslam_core.exploration.explorer import State
+from mrslam_core.exploration.frontiers import frontier_cells, frontier_groups
+from mrslam_core.exploration.grid import OccupancyGrid, Scan
+from mrslam_core.exploration.planning import astar, pure_pursuit
+from mrslam_core.exploration.sim2d import TeamSim2D
+from mrslam_core.sim.world import load_world
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_cost_equals_update_rule(seed):
+    rng = np.random.default_rng(seed)
+    prob = rng.uniform(0.0, 0.5, (9, 11))
+    prob[rng.random((9, 11)) < 0.2] = 0.9  # untraversable cells
+    prob[4, 5] = 0.1
+    got = travel_cost(prob, np.array([[4, 5]]), occ_max=0.65, resolution=0.1)[0]
+    want = value_iteration_reference(prob, (4, 5), occ_max=0.65, resolution=0.1)
+    np.testing.assert_allclose(got, want, rtol=1e-9)
+    assert np.isinf(got[prob > 0.65]).all()
+
+
+def test_cost_hand_computed():
+    prob = np.array([[0.5, 0.2, 0.9, 0.1]])
+    cost = travel_cost(prob, np.array([[0, 0]]), 0.65, 1.0)[0, 0]
+    np.testing.assert_allclose(cost[:2], [0.0, 0.2])  # stepping into a cell costs P(cell) · 1 m
+    assert np.isinf(cost[2]) and np.isinf(cost[3])  # a wall cuts the corridor
+
+
+def test_assignment_spreads_robots():
+    targets = np.array([[0.0, 0.0], [0.5, 0.0], [10.0, 0.0]])
+    cost = np.array([[0.1, 0.2, 2.0], [0.1, 0.2, 1.5]])  # both prefer the left cluster
+    coord = assign_targets(targets, cost, beta=0.5, utility_range=4.0, coordinated=True)
+    assert coord.tolist() == [0, 2]  # robot 2 sent to the other cluster
+    selfish = assign_targets(targets, cost, beta=0.5, utility_range=4.0, coordinated=False)
+    assert selfish.tolist() == [0, 0]
+    # utility discount of eq. 8–9: P(d) = 1 − d / max_range
+    unreachable = np.array([[np.inf, np.inf, np.inf]])
+    assert assign_targets(targets, unreachable, 0.5, 4.0).tolist() == [-1]
+
+
+def test_frontiers_on_a_known_map():
+    known = np.zeros((6, 8), bool)
+    known[:, :4] = True
+    free = known.copy()
+    free[0, :] = False
+    front = frontier_cells(free, known)
+    assert np.argwhere(front).tolist() == [[r, 3] for r in range(1, 6)]
+    assert len(frontier_groups(front, 5)) == 1 and len(frontier_groups(front, 6)) == 0
+
+
+def test_astar_maze():
+    grid = np.ones((5, 7), bool)
+    grid[0:4, 2] = False
+    grid[1:5, 4] = False
+    path = astar(grid, (0, 0), (0, 6))
+    assert path[0] == (0, 0) and path[-1] == (0, 6)
+    assert all(grid[c] for c in path)
+    steps = np.diff(np.array(path), axis=0)
+    length = np.sum(np.where(np.abs(steps).sum(1) == 2, np.sqrt(2), 1.0))
+    assert length == pytest.approx(6 + 4 * np.sqrt(2))  # down, through the gap, up and over
+    assert astar(grid, (0, 0), (0, 2)) is None  # a blocked goal
+
+
+def test_grid_marks_free_and_hits():
+    grid = OccupancyGrid(GridConfig(resolution=0.1, size=(5.0, 2.0), origin=(0.0, 0.0)))
+    grid.insert(np.array([0.05, 1.05, 0.0]), Scan(np.array([0.0]), np.array([2.0]), np.array([True])))
+    p = grid.probability()
+    assert p[10, 20] > 0.65  # the end cell at x = 2.05
+    assert (p[10, 1:19] < 0.4).all()  # the cells the beam crossed
+    assert not grid.observed[10, 25]
+
+
+def test_pure_pursuit_turns_towards_the_path():
+    v, w, _ = pure_pursuit(np.array([0.0, 0.0, 0.0]), np.array([[0.0, 0.0], [1.0, 1.0]]), 0.5, 0.5, 1.0)
+    assert v > 0 and w > 0
+    v, w, _ = pure_pursuit(np.array([0.0, 0.0, 0.0]), np.array([[0.0, 0.0], [-1.0, 0.0]]), 0.5, 0.5, 1.0)
+    assert v == 0 and w != 0  # target behind: turn on the spot
+
+
+def test_seeded_run_explores_small_world_and_stops():
+    sim = TeamSim2D(load_world("small"), 2, ExplorationConfig(return_to_start=True), seed=3)
+    curve = sim.run(300)
+    assert curve[-1][1] >= 0.9
+    assert sim.explorer.state is State.COMPLETE
+    assert curve[-1][0] < 300  # stopped by itself, did not run out of time
