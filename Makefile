@@ -10,10 +10,13 @@ DATA   ?= ../shared/data
 
 venv: $(STAMP)
 
-$(STAMP): pyproject.toml
+# ROS 2 Jazzy comes from PyPI wheels; tf2_msgs is not among them and is generated with the
+# wheels' rosidl generators (needs cmake, make and a C compiler).
+$(STAMP): pyproject.toml scripts/build_interfaces.sh mrslam_ros/interfaces/tf2_msgs/CMakeLists.txt
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e ".[ros,test]"
+	$(PY) -m pip install --quiet -e ".[ros,rosgen,test]"
+	scripts/build_interfaces.sh $(VENV)
 	touch $(STAMP)
 
 # Until the simulated team lands, the main job is the joint filter on real multi-robot data.

@@ -56,10 +56,3 @@ def noisy_increment(ds: np.ndarray, dth: np.ndarray, cfg: OdometryNoiseConfig, t
     return np.stack([along * np.cos(half) - across * np.sin(half),
                      along * np.sin(half) + across * np.cos(half), dth_o], axis=1)
 
-
-def integrate(pose: np.ndarray, inc: np.ndarray) -> np.ndarray:
-    """Compose (N, 3) poses with (N, 3) base_link increments; θ wrapped to (−π, π]."""
-    c, s = np.cos(pose[:, 2]), np.sin(pose[:, 2])
-    return np.stack([pose[:, 0] + c * inc[:, 0] - s * inc[:, 1],
-                     pose[:, 1] + s * inc[:, 0] + c * inc[:, 1],
-                     wrap_angle(pose[:, 2] + inc[:, 2])], axis=1)
