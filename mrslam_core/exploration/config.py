@@ -46,6 +46,8 @@ class ExplorationConfig:
         replan_period: re-assign targets at least this often [s].
         progress_timeout: a goal with no progress for this long is blacklisted [s].
         blacklist_radius: frontier cells within this of a blacklisted goal are skipped [m].
+        blacklist_period: a failed goal is skipped for this long, then tried again [s].
+        max_strikes: after this many failures at one place it is skipped for good.
         return_to_start: drive back to the start pose once exploration is complete.
         max_speed, max_turn_rate: path follower limits [m/s, rad/s].
         lookahead: pure-pursuit lookahead distance [m].
@@ -62,6 +64,8 @@ class ExplorationConfig:
     replan_period: float = 4.0
     progress_timeout: float = 8.0
     blacklist_radius: float = 0.5
+    blacklist_period: float = 30.0
+    max_strikes: int = 3
     return_to_start: bool = False
     max_speed: float = 0.5
     max_turn_rate: float = 1.2

@@ -43,6 +43,7 @@ class Explorer:
     starts: dict[str, np.ndarray] = field(default_factory=dict)
     goals: dict[str, Goal | None] = field(default_factory=dict)
     blacklist: list[np.ndarray] = field(default_factory=list)
+    strikes: list[list[float]] = field(default_factory=list)  # per entry: [failures, blocked until s]
     state: State = State.EXPLORING
     last_plan_s: float = -np.inf
     plans: int = 0
@@ -53,19 +54,23 @@ class Explorer:
         prob = grid.probability()
         free, known = grid.free(), grid.observed
         frontier = frontier_cells(free, known)
-        if self.blacklist:
-            centres = grid.centre_of(np.argwhere(frontier))
-            bad = np.zeros(len(centres), bool)
-            for b in self.blacklist:
-                bad |= np.linalg.norm(centres - b, axis=1) < cfg.blacklist_radius
-            fc = np.argwhere(frontier)[bad]
-            frontier[fc[:, 0], fc[:, 1]] = False
         self.plans += 1
         self.last_plan_s = now
         passable = ~inflate(grid.occupied(), cfg.robot_radius / grid.res)
-        # a frontier the robot cannot stand on (hugging a wall) is not a goal
-        groups = frontier_groups(frontier & passable, cfg.min_frontier_cells)
-        if not groups and free.any():
+        frontier &= passable  # a frontier the robot cannot stand on (hugging a wall) is not a goal
+        waiting = False  # a frontier blocked only for now will be tried again: not complete yet
+        if self.blacklist:
+            centres = grid.centre_of(np.argwhere(frontier))
+            bad = np.zeros(len(centres), bool)
+            for b, (fails, until) in zip(self.blacklist, self.strikes):
+                near = np.linalg.norm(centres - b, axis=1) < cfg.blacklist_radius
+                if fails >= cfg.max_strikes or now < until:
+                    bad |= near
+                    waiting |= fails < cfg.max_strikes and int(near.sum()) >= cfg.min_frontier_cells
+            fc = np.argwhere(frontier)[bad]
+            frontier[fc[:, 0], fc[:, 1]] = False
+        groups = frontier_groups(frontier, cfg.min_frontier_cells)
+        if not groups and free.any() and not waiting:
             if self.state is State.EXPLORING:
                 self.state = State.RETURNING if cfg.return_to_start else State.COMPLETE
             if self.state is State.RETURNING:
@@ -79,10 +84,13 @@ class Explorer:
         cells = np.clip(cells, 0, np.array(grid.shape) - 1)
         cost = travel_cost(prob, cells, cfg.occ_max, grid.res)[:, targets[:, 0], targets[:, 1]]
         txy = grid.centre_of(targets)
+        far_cost = cost.copy()
         for i, name in enumerate(self.robots):
-            near = np.linalg.norm(txy - poses[name][:2], axis=1) < cfg.min_target_distance
-            cost[i, near] = np.inf
-        chosen = assign_targets(txy, cost, cfg.beta, cfg.utility_range, cfg.coordinated)
+            far_cost[i, np.linalg.norm(txy - poses[name][:2], axis=1) < cfg.min_target_distance] = np.inf
+        chosen = assign_targets(txy, far_cost, cfg.beta, cfg.utility_range, cfg.coordinated)
+        for i in np.flatnonzero(chosen < 0):  # only near frontiers left: turn and look at them
+            if np.isfinite(cost[i]).any():
+                chosen[i] = int(np.argmin(cost[i]))
         for name, j in zip(self.robots, chosen):
             if j < 0:
                 self.goals[name] = None
@@ -98,11 +106,23 @@ class Explorer:
         near = (rr - start[0]) ** 2 + (cc - start[1]) ** 2 <= (self.config.robot_radius / grid.res + 2) ** 2
         path = astar(passable | (near & ~grid.occupied()), start, goal)
         if path is None:
-            self.blacklist.append(np.asarray(target, float))
+            self._strike(np.asarray(target, float), now)
             self.goals[name] = None
             return
         path_xy = grid.centre_of(np.array(path))
         self.goals[name] = Goal(np.asarray(target, float), path_xy, now)
+
+    def _strike(self, target: np.ndarray, now: float) -> None:
+        """A goal failed (no path, or no headway): block it for a while; after ``max_strikes``
+        failures at the same place, for good (so exploration neither hangs nor stops early)."""
+        cfg = self.config
+        for b, strike in zip(self.blacklist, self.strikes):
+            if np.linalg.norm(b - target) < cfg.blacklist_radius:
+                strike[0] += 1
+                strike[1] = now + cfg.blacklist_period
+                return
+        self.blacklist.append(np.asarray(target, float))
+        self.strikes.append([1.0, now + cfg.blacklist_period])
 
     def step(self, grid: OccupancyGrid, poses: dict[str, np.ndarray], now: float) -> dict[str, tuple[float, float]]:
         """Commands (v [m/s], ω [rad/s]) per robot at time ``now`` [s]."""
@@ -113,7 +133,7 @@ class Explorer:
         for name in self.robots:
             g = self.goals.get(name)
             if g is None:
-                due = True
+                due |= now - self.last_plan_s >= 1.0  # idle robots ask again, at most once a second
                 continue
             d = float(np.linalg.norm(poses[name][:2] - g.target))
             where, since = self.checkpoints.setdefault(name, (poses[name][:2].copy(), now))
@@ -124,7 +144,7 @@ class Explorer:
                 self.checkpoints[name] = (poses[name][:2].copy(), now)
             elif now - since > cfg.progress_timeout:
                 # no headway for a while (blocked, or oscillating): never chase this goal again
-                self.blacklist.append(g.target)
+                self._strike(g.target, now)
                 self.goals[name] = None
                 self.checkpoints[name] = (poses[name][:2].copy(), now)
                 due = True

@@ -120,7 +120,7 @@ class SimConfig:
         world: a built-in world name (``office``, ``small``) or a path to a world YAML.
         physics_hz: physics steps per simulated second.
         seed: seeds the odometry noise and the procedural textures.
-        texture_density: texels per metre on walls and furniture (the floor gets half).
+        texture_density: texels per metre on the floor, walls and furniture.
         laser_height: height of the ray-cast pseudo-laser above the floor [m].
     """
 
@@ -128,7 +128,7 @@ class SimConfig:
     physics_hz: float = 50.0
     seed: int = 0
     texture_density: float = 64.0
-    laser_height: float = 0.3
+    laser_height: float = 0.2
     camera: StereoCameraConfig = field(default_factory=StereoCameraConfig)
     drive: DriveConfig = field(default_factory=DriveConfig)
     odometry: OdometryNoiseConfig = field(default_factory=OdometryNoiseConfig)

@@ -1,8 +1,19 @@
 """The simulated team: pybullet physics, differential drive, wheel odometry, stereo rendering.
 
-Frames (REP-103/105): map (x, y on the floor, z up); each robot's base_link on the floor between
-the wheels (x forward, y left); the left camera's optical frame (x right, y down, z forward).
-Time is simulated: the clock advances one physics step at a time (ns).
+Frames (REP-103/105): map (x, y on the floor, z up); each robot's odom frame is its start pose;
+base_link on the floor midway between the wheels (x forward, y left); the cameras' optical frames
+x right, y down, z forward. Time is simulated: the clock advances one physics step at a time (ns),
+as fast as the machine computes it.
+
+Typical loop (what a ROS node does)::
+
+    sim = Simulation(SimConfig(), load_world("office"))
+    sim.add_robot("robot1"); sim.add_robot("robot2")
+    while sim.time_ns < end_ns:
+        sim.set_command("robot1", v, omega)
+        for name in sim.step_until_frame():          # physics steps up to the next camera frame
+            frame = sim.render_stereo(name)
+            pose, twist = sim.odometry(name)
 """
 
 from __future__ import annotations
@@ -15,254 +26,324 @@ import numpy as np
 import pybullet as p
 
 from mrslam_core.frontend.camera import CameraCalibration
-from mrslam_core.geometry.se2 import compose, wrap_angle
+from mrslam_core.geometry.se2 import compose
+from mrslam_core.sim import robot as robot_model
 from mrslam_core.sim.config import SimConfig
 from mrslam_core.sim.errors import SimError
-from mrslam_core.sim.textures import repetitive_texture, unique_texture, write_texture
+from mrslam_core.sim.odometry import noisy_increment, true_increment
+from mrslam_core.sim.scene import build_scene
 from mrslam_core.sim.world import World, load_world
 
-URDF = Path(__file__).resolve().parent / "data" / "pioneer3dx.urdf"
-R_BASE_OPTICAL = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
-
-
-@dataclass
-class _Robot:
-    body: int
-    cmd: np.ndarray  # commanded (v, ω)
-    vel: np.ndarray  # actual (v, ω) after acceleration limits
-    odom: np.ndarray  # odom-frame pose (x, y, θ)
-    odom_twist: np.ndarray  # (v, ω) measured by the wheels
-    prev_truth: np.ndarray
-    next_frame_ns: int
+_LUMA = np.array([77, 150, 29], np.uint16)  # ITU-R BT.601 weights ×256
 
 
 @dataclass(frozen=True)
 class StereoFrame:
-    """One rendered stereo pair.
+    """One rendered stereo pair (rectified: rows are epipolar lines).
 
     Attributes:
-        left, right: (H, W) uint8 grey images (mono8), rows top to bottom.
-        depth: (H, W) float32 z-depth of the left image in its optical frame [m].
+        left, right: images, (H, W) uint8 for mono8 or (H, W, 3) uint8 RGB for rgb8, rows top to
+            bottom.
+        depth: (H, W) float32 z-depth of every left-image pixel in the left optical frame [m];
+            ``far`` where nothing was drawn.
         stamp_ns: simulated time of the exposure [ns].
+        encoding: ``mono8`` or ``rgb8``.
     """
 
     left: np.ndarray
     right: np.ndarray
     depth: np.ndarray
     stamp_ns: int
+    encoding: str
 
 
 class Simulation:
-    """A pybullet world with Pioneer 3-DX robots (DIRECT mode, one client per instance).
+    """A pybullet world with Pioneer 3-DX robots (DIRECT mode, one physics client per instance,
+    so several simulations can live in one process).
 
     Args:
         config: simulation parameters.
         world: a parsed world; default ``load_world(config.world)``.
+
+    Raises:
+        SimError: the world cannot be loaded or pybullet cannot connect.
     """
 
     def __init__(self, config: SimConfig | None = None, world: World | None = None):
         self.config = config or SimConfig()
-        self.world = world or load_world(self.config.world)
-        self.rng = np.random.default_rng(self.config.seed)
-        self.client = p.connect(p.DIRECT)
-        p.setGravity(0, 0, 0, physicsClientId=self.client)
-        p.setTimeStep(1.0 / self.config.physics_hz, physicsClientId=self.client)
+        self.world = world if world is not None else load_world(self.config.world)
+        self._rng = np.random.default_rng(self.config.seed)
         self._dt_ns = int(round(1e9 / self.config.physics_hz))
-        self.time_ns = 0
-        self.robots: dict[str, _Robot] = {}
-        self._texdir = Path(tempfile.gettempdir()) / f"mrslam_textures_{self.config.texture_size}"
-        self._build_world()
+        self._dt = self._dt_ns * 1e-9
+        self._time_ns = 0
+        self._names: list[str] = []
+        self._bodies: list[int] = []
+        self._cmd = np.zeros((0, 2))  # commanded (v, ω)
+        self._vel = np.zeros((0, 2))  # driven (v, ω) after the acceleration limits
+        self._truth = np.zeros((0, 3))
+        self._truth_twist = np.zeros((0, 2))
+        self._odom = np.zeros((0, 3))
+        self._odom_twist = np.zeros((0, 2))
+        self._next_frame_ns = np.zeros(0, np.int64)
+        self._tmp = tempfile.TemporaryDirectory(prefix="mrslam_sim_")
+        self.client: int | None = p.connect(p.DIRECT)
+        if self.client < 0:
+            raise SimError("pybullet could not start a DIRECT physics client")
+        cid = self.client
+        p.setGravity(0, 0, 0, physicsClientId=cid)
+        p.setTimeStep(self._dt, physicsClientId=cid)
+        build_scene(cid, self.world, self.config.seed, self.config.texture_density, Path(self._tmp.name))
+        self._urdf = Path(self._tmp.name) / "pioneer3dx.urdf"
+        self._urdf.write_text(self.robot_description())
         cam = self.config.camera
         self._fx = cam.width / (2.0 * np.tan(np.radians(cam.hfov_deg) / 2))
-        self._vfov_deg = float(np.degrees(2 * np.arctan(np.tan(np.radians(cam.hfov_deg) / 2) * cam.height / cam.width)))
-        self._proj = p.computeProjectionMatrixFOV(self._vfov_deg, cam.width / cam.height, cam.near, cam.far)
-
-    # ------------------------------------------------------------------ world
-    def _texture(self, name: str, img: np.ndarray) -> int:
-        path = write_texture(img, self._texdir, name)
-        return p.loadTexture(str(path), physicsClientId=self.client)
-
-    def _build_world(self) -> None:
-        w, cid, size = self.world, self.client, self.config.texture_size
-        seed = self.config.seed
-        tile = 2.0
-        nx, ny = int(np.ceil(w.size[0] / tile)), int(np.ceil(w.size[1] / tile))
-        floor_vis = p.createVisualShape(p.GEOM_BOX, halfExtents=[tile / 2, tile / 2, 0.005], physicsClientId=cid)
-        for i in range(nx):
-            for j in range(ny):
-                floor = p.createMultiBody(0, -1, floor_vis, [(i + 0.5) * tile, (j + 0.5) * tile, -0.005],
-                                          physicsClientId=cid)
-                tex = self._texture(f"floor_{seed}_{i}_{j}", unique_texture(size, seed * 100003 + 50000 + i * 97 + j))
-                p.changeVisualShape(floor, -1, textureUniqueId=tex, rgbaColor=[1, 1, 1, 1], physicsClientId=cid)
-        rep = self._texture("repetitive", repetitive_texture(size))
-        for k, (centre, half, yaw, height, idx) in enumerate(w.visual_pieces()):
-            # one body per piece with its own collision box (a body without a visual shape would be
-            # drawn from its collision shape and z-fight with the textured faces)
-            ext = [half[0], half[1], height / 2]
-            col = p.createCollisionShape(p.GEOM_BOX, halfExtents=ext, physicsClientId=cid)
-            vis = p.createVisualShape(p.GEOM_BOX, halfExtents=ext, physicsClientId=cid)
-            body = p.createMultiBody(0, col, vis, [centre[0], centre[1], height / 2],
-                                     p.getQuaternionFromEuler([0, 0, yaw]), physicsClientId=cid)
-            tex = rep if idx in w.repetitive else self._texture(f"solid_{seed}_{k}", unique_texture(size, seed * 100003 + k))
-            p.changeVisualShape(body, -1, textureUniqueId=tex, rgbaColor=[1, 1, 1, 1], physicsClientId=cid)
+        vfov = 2 * np.degrees(np.arctan(cam.height / (2 * self._fx)))
+        self._proj = p.computeProjectionMatrixFOV(vfov, cam.width / cam.height, cam.near, cam.far)
 
     # ------------------------------------------------------------------ robots
+    @property
+    def robot_names(self) -> list[str]:
+        """Names of the robots, in the order they were added."""
+        return list(self._names)
+
+    def robot_description(self) -> str:
+        """URDF text of the robots (wheels and stereo head as configured)."""
+        return robot_model.robot_description(self.config.camera, self.config.drive)
+
     def add_robot(self, name: str, start_pose: np.ndarray | None = None) -> None:
-        """Place a robot at ``start_pose`` (x, y, θ) in the map (default: the world's next start)."""
-        if name in self.robots:
-            raise SimError(f"robot {name!r} exists already")
+        """Place a robot at ``start_pose`` (x, y, θ) in the map [m, m, rad].
+
+        Default: the world's next unused start pose. The robot's odom frame is its start pose;
+        its first stereo frame is due now.
+
+        Raises:
+            SimError: duplicate name, no start pose left, or a start pose that is not 3 finite numbers.
+        """
+        if not isinstance(name, str) or not name or name in self._names:
+            raise SimError(f"robot name {name!r} is empty or exists already")
         if start_pose is None:
-            if len(self.robots) >= len(self.world.start_poses):
+            if len(self._names) >= len(self.world.start_poses):
                 raise SimError(f"world {self.world.name} has only {len(self.world.start_poses)} start poses")
-            start_pose = self.world.start_poses[len(self.robots)]
-        start = np.asarray(start_pose, dtype=float)
+            start_pose = self.world.start_poses[len(self._names)]
+        start = np.asarray(start_pose, dtype=float).reshape(-1)
         if start.shape != (3,) or not np.isfinite(start).all():
             raise SimError(f"start pose must be 3 finite numbers, got {start_pose!r}")
-        body = p.loadURDF(str(URDF), [start[0], start[1], 0.0], p.getQuaternionFromEuler([0, 0, start[2]]),
+        body = p.loadURDF(str(self._urdf), [start[0], start[1], 0.0], p.getQuaternionFromEuler([0, 0, start[2]]),
                           physicsClientId=self.client)
-        p.changeDynamics(body, -1, linearDamping=0, angularDamping=0, physicsClientId=self.client)
-        self.robots[name] = _Robot(body, np.zeros(2), np.zeros(2), np.zeros(3), np.zeros(2), start.copy(),
-                                   self.time_ns)
+        p.changeDynamics(body, -1, linearDamping=0, angularDamping=0, lateralFriction=0.0,
+                         physicsClientId=self.client)
+        self._names.append(name)
+        self._bodies.append(body)
+        self._cmd = np.vstack([self._cmd, np.zeros(2)])
+        self._vel = np.vstack([self._vel, np.zeros(2)])
+        self._truth = np.vstack([self._truth, start])
+        self._truth_twist = np.vstack([self._truth_twist, np.zeros(2)])
+        self._odom = np.vstack([self._odom, np.zeros(3)])
+        self._odom_twist = np.vstack([self._odom_twist, np.zeros(2)])
+        self._next_frame_ns = np.append(self._next_frame_ns, self._time_ns)
 
-    def _robot(self, name: str) -> _Robot:
+    def _index(self, name: str) -> int:
         try:
-            return self.robots[name]
-        except KeyError:
-            raise SimError(f"unknown robot {name!r}; have {sorted(self.robots)}") from None
+            return self._names.index(name)
+        except ValueError:
+            raise SimError(f"unknown robot {name!r}; have {self._names}") from None
 
-    def set_command(self, name: str, v: float, w: float) -> None:
-        """Command forward speed v [m/s] and turn rate ω [rad/s] (clipped to the drive limits)."""
-        if not (np.isfinite(v) and np.isfinite(w)):
-            raise SimError(f"{name}: non-finite command ({v}, {w})")
+    def set_command(self, name: str, v: float, omega: float) -> None:
+        """Command forward speed ``v`` [m/s] and turn rate ``omega`` [rad/s] (counter-clockwise
+        positive), clipped to the drive's limits; held until the next command.
+
+        Raises:
+            SimError: unknown robot or a non-finite command.
+        """
+        i = self._index(name)
+        if not (np.isfinite(v) and np.isfinite(omega)):
+            raise SimError(f"{name}: non-finite command ({v}, {omega})")
         d = self.config.drive
-        self._robot(name).cmd = np.array([np.clip(v, -d.max_speed, d.max_speed),
-                                          np.clip(w, -d.max_turn_rate, d.max_turn_rate)])
+        self._cmd[i] = [np.clip(v, -d.max_speed, d.max_speed), np.clip(omega, -d.max_turn_rate, d.max_turn_rate)]
 
     def ground_truth(self, name: str) -> np.ndarray:
-        """Pose (x, y, θ) of base_link in the map [m, m, rad]."""
-        pos, orn = p.getBasePositionAndOrientation(self._robot(name).body, physicsClientId=self.client)
-        return np.array([pos[0], pos[1], p.getEulerFromQuaternion(orn)[2]])
+        """(3,) true pose (x, y, θ) of base_link in the map [m, m, rad]."""
+        return self._truth[self._index(name)].copy()
+
+    def ground_truth_twist(self, name: str) -> np.ndarray:
+        """(2,) true (v, ω) of base_link over the last physics step [m/s, rad/s]."""
+        return self._truth_twist[self._index(name)].copy()
 
     def odometry(self, name: str) -> tuple[np.ndarray, np.ndarray]:
-        """Wheel odometry: (pose (x, y, θ) of base_link in the robot's odom frame, twist (v, ω))."""
-        r = self._robot(name)
-        return r.odom.copy(), r.odom_twist.copy()
+        """Wheel odometry: pose (x, y, θ) of base_link in the robot's odom frame [m, m, rad] and
+        twist (v, ω) over the last physics step [m/s, rad/s], both (noisy) copies."""
+        i = self._index(name)
+        return self._odom[i].copy(), self._odom_twist[i].copy()
 
     # ------------------------------------------------------------------ time
-    def step(self) -> None:
-        """Advance one physics step: acceleration limits, drive, contacts, odometry."""
-        dt = 1.0 / self.config.physics_hz
-        d = self.config.drive
-        for r in self.robots.values():
-            dv = np.clip(r.cmd - r.vel, [-d.max_accel * dt, -d.max_turn_accel * dt], [d.max_accel * dt, d.max_turn_accel * dt])
-            r.vel = r.vel + dv
-            th = r.prev_truth[2]
-            p.resetBaseVelocity(r.body, [r.vel[0] * np.cos(th), r.vel[0] * np.sin(th), 0], [0, 0, r.vel[1]],
-                                physicsClientId=self.client)
-        p.stepSimulation(physicsClientId=self.client)
-        self.time_ns += self._dt_ns
-        for name, r in self.robots.items():
-            pos, orn = p.getBasePositionAndOrientation(r.body, physicsClientId=self.client)
-            yaw = p.getEulerFromQuaternion(orn)[2]
-            # keep the robot on the floor and upright (contacts may tilt it)
-            p.resetBasePositionAndOrientation(r.body, [pos[0], pos[1], 0.0], p.getQuaternionFromEuler([0, 0, yaw]),
-                                              physicsClientId=self.client)
-            truth = np.array([pos[0], pos[1], yaw])
-            self._integrate_odometry(r, truth, dt)
-            r.prev_truth = truth
+    @property
+    def time_ns(self) -> int:
+        """The simulated clock [ns]; 0 at construction."""
+        return self._time_ns
 
-    def _integrate_odometry(self, r: _Robot, truth: np.ndarray, dt: float) -> None:
-        """Wheel distances of the true motion, corrupted by the configured errors, integrated."""
-        n = self.config.odometry
-        track = self.config.drive.track
-        c, s = np.cos(r.prev_truth[2]), np.sin(r.prev_truth[2])
-        dx, dy = truth[0] - r.prev_truth[0], truth[1] - r.prev_truth[1]
-        ds = c * dx + s * dy
-        dth = float(wrap_angle(truth[2] - r.prev_truth[2]))
-        wheels = np.array([ds - dth * track / 2, ds + dth * track / 2])
-        wheels = wheels * (1 + np.array([n.scale_error_left, n.scale_error_right]))
-        wheels += self.rng.standard_normal(2) * np.sqrt(n.k_wheel * np.abs(wheels))
-        ds_o = wheels.mean()
-        dth_o = (wheels[1] - wheels[0]) / (track * (1 + n.track_error))
-        r.odom = compose(r.odom, np.array([ds_o * np.cos(dth_o / 2), ds_o * np.sin(dth_o / 2), dth_o]))
-        r.odom_twist = np.array([ds_o / dt, dth_o / dt])
+    @property
+    def physics_step_ns(self) -> int:
+        """Length of one physics step [ns]."""
+        return self._dt_ns
+
+    def step(self, dt: float | None = None) -> int:
+        """Advance one physics step, or ``dt`` seconds rounded to whole steps (at least one).
+
+        Returns:
+            the clock after the steps [ns].
+        """
+        n = 1 if dt is None else max(1, int(round(dt / self._dt)))
+        for _ in range(n):
+            self._physics_step()
+        return self._time_ns
 
     def run_until(self, t_ns: int) -> None:
-        """Step until the clock reaches ``t_ns``."""
-        while self.time_ns < t_ns:
-            self.step()
+        """Step until the clock reaches ``t_ns`` [ns]."""
+        while self._time_ns < t_ns:
+            self._physics_step()
 
     def frames_due(self) -> list[str]:
-        """Robots whose next stereo frame is due at the current time."""
-        return [n for n, r in self.robots.items() if r.next_frame_ns <= self.time_ns]
+        """Robots whose next stereo frame is due at the current time (call :meth:`render_stereo`)."""
+        return [n for n, t in zip(self._names, self._next_frame_ns) if t <= self._time_ns]
+
+    def step_until_frame(self) -> list[str]:
+        """Step until at least one robot's stereo frame is due (no step if one is due now).
+
+        Returns:
+            the robots whose frame is due.
+
+        Raises:
+            SimError: no robots.
+        """
+        if not self._names:
+            raise SimError("no robots: add one before stepping to a frame")
+        self.run_until(int(self._next_frame_ns.min()))
+        return self.frames_due()
+
+    def _physics_step(self) -> None:
+        """Acceleration limits, kinematic drive, contacts, then ground truth and odometry."""
+        d, dt, cid = self.config.drive, self._dt, self.client
+        if self._names:
+            lim = np.array([d.max_accel, d.max_turn_accel]) * dt
+            self._vel = self._vel + np.clip(self._cmd - self._vel, -lim, lim)
+            th = self._truth[:, 2]
+            for body, (v, w), c, s in zip(self._bodies, self._vel, np.cos(th), np.sin(th)):
+                lin = np.array([v * c, v * s, 0.0])
+                # a wheel cannot push into an obstacle: drop the velocity component into each contact
+                for contact in p.getContactPoints(bodyA=body, physicsClientId=cid):
+                    n = np.array([contact[7][0], contact[7][1], 0.0])  # normal on B, towards this body
+                    if contact[8] < 0.005 and lin @ n < 0 and n @ n > 1e-6:
+                        n /= np.linalg.norm(n)
+                        lin -= (lin @ n) * n
+                p.resetBaseVelocity(body, lin.tolist(), [0.0, 0.0, w], physicsClientId=cid)
+        p.stepSimulation(physicsClientId=cid)
+        self._time_ns += self._dt_ns
+        if not self._names:
+            return
+        now = np.empty_like(self._truth)
+        for i, body in enumerate(self._bodies):
+            pos, orn = p.getBasePositionAndOrientation(body, physicsClientId=cid)
+            yaw = p.getEulerFromQuaternion(orn)[2]
+            now[i] = pos[0], pos[1], yaw
+            # keep the robot on the floor and upright (contacts may lift or tilt it)
+            p.resetBasePositionAndOrientation(body, [pos[0], pos[1], 0.0], p.getQuaternionFromEuler([0, 0, yaw]),
+                                              physicsClientId=cid)
+        ds, dth = true_increment(self._truth, now)
+        self._truth_twist = np.stack([ds, dth], axis=1) / dt
+        inc = noisy_increment(ds, dth, self.config.odometry, d.track, self._rng)
+        self._odom = compose(self._odom, inc)
+        self._odom_twist = inc[:, [0, 2]] / dt
+        self._truth = now
 
     # ------------------------------------------------------------------ cameras
-    def camera_extrinsic(self) -> np.ndarray:
-        """(4, 4) base_link <- left camera optical frame."""
-        cam = self.config.camera
-        t = np.eye(4)
-        t[:3, :3] = R_BASE_OPTICAL
-        t[:3, 3] = [cam.mount_x, cam.baseline / 2, cam.mount_z]
-        return t
+    def camera_extrinsic(self, side: str = "left") -> np.ndarray:
+        """(4, 4) pose of the ``side`` camera's optical frame in base_link (p_base = T · p_opt)."""
+        return robot_model.camera_extrinsic(self.config.camera, side)
 
-    def camera_calibrations(self) -> tuple[CameraCalibration, CameraCalibration]:
-        """Left and right CameraInfo-like calibrations of the (already rectified) renderings."""
+    def camera_infos(self) -> tuple[CameraCalibration, CameraCalibration]:
+        """CameraInfo data of the left and right renderings (already rectified: D = 0, R = I).
+
+        K = [[f, 0, W/2], [0, f, H/2 − 1], [0, 0, 1]] with f = W / (2 tan(hfov/2)): TinyRenderer
+        samples pixel (u, v) at window coordinates (u, H − 1 − v), not at pixel centres; the
+        test against the rendered depth of a slanted wall and the floor pins this down.
+        P = [K | 0] for the left camera, P[0, 3] = −f·baseline for the right one (ROS).
+        """
         cam = self.config.camera
         f = self._fx
-        cx, cy = cam.width / 2 - 0.5, cam.height / 2 - 0.5
-        k = np.array([[f, 0, cx], [0, f, cy], [0, 0, 1.0]])
+        k = np.array([[f, 0.0, cam.width / 2], [0.0, f, cam.height / 2 - 1.0], [0.0, 0.0, 1.0]])
         pl = np.hstack([k, np.zeros((3, 1))])
         pr = pl.copy()
         pr[0, 3] = -f * cam.baseline
         common = dict(width=cam.width, height=cam.height, K=k, D=np.zeros(5), R=np.eye(3), distortion_model="plumb_bob")
         return CameraCalibration(P=pl, **common), CameraCalibration(P=pr, **common)
 
-    def _render(self, eye: np.ndarray, forward: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    camera_calibrations = camera_infos
+
+    def _render(self, eye: np.ndarray, forward: np.ndarray, want_depth: bool) -> tuple[np.ndarray, np.ndarray | None]:
         cam = self.config.camera
         view = p.computeViewMatrix(eye.tolist(), (eye + forward).tolist(), [0, 0, 1])
-        _, _, rgb, depth, _ = p.getCameraImage(cam.width, cam.height, view, self._proj, renderer=p.ER_TINY_RENDERER,
-                                               flags=p.ER_NO_SEGMENTATION_MASK, physicsClientId=self.client)
-        rgb = np.asarray(rgb, np.uint8).reshape(cam.height, cam.width, 4)
-        grey = (rgb[..., :3].astype(np.uint16) @ np.array([77, 150, 29], np.uint16) >> 8).astype(np.uint8)
-        d = np.asarray(depth, np.float32).reshape(cam.height, cam.width)
-        z = cam.far * cam.near / (cam.far - (cam.far - cam.near) * d)
-        return grey, z.astype(np.float32)
+        # ambient + diffuse only: a specular term depends on the eye and would differ between the cameras
+        _, _, rgba, depth, _ = p.getCameraImage(
+            cam.width, cam.height, view, self._proj, renderer=p.ER_TINY_RENDERER, shadow=0,
+            lightDirection=[0.4, 0.6, 1.0], lightAmbientCoeff=0.6, lightDiffuseCoeff=0.45, lightSpecularCoeff=0.0,
+            flags=p.ER_NO_SEGMENTATION_MASK, physicsClientId=self.client)
+        rgb = np.asarray(rgba, np.uint8).reshape(cam.height, cam.width, 4)[..., :3]
+        img = np.ascontiguousarray(rgb) if cam.encoding == "rgb8" else ((rgb.astype(np.uint16) @ _LUMA) >> 8).astype(np.uint8)
+        if not want_depth:
+            return img, None
+        # OpenGL depth buffer b ∈ [0, 1] to z-depth: z = f·n / (f − (f − n)·b)
+        b = np.asarray(depth, np.float64).reshape(cam.height, cam.width)
+        z = cam.far * cam.near / (cam.far - (cam.far - cam.near) * b)
+        return img, z.astype(np.float32)
 
     def render_stereo(self, name: str) -> StereoFrame:
-        """Render robot ``name``'s stereo pair now and schedule its next frame."""
-        r = self._robot(name)
+        """Render robot ``name``'s stereo pair at the current time and schedule its next frame
+        one camera period after the one that was due."""
+        i = self._index(name)
         cam = self.config.camera
-        pose = self.ground_truth(name)
-        c, s = np.cos(pose[2]), np.sin(pose[2])
+        x, y, th = self._truth[i]
+        c, s = np.cos(th), np.sin(th)
         forward = np.array([c, s, 0.0])
         leftward = np.array([-s, c, 0.0])
-        centre = np.array([pose[0] + c * cam.mount_x, pose[1] + s * cam.mount_x, cam.mount_z])
-        left, depth = self._render(centre + leftward * cam.baseline / 2, forward)
-        right, _ = self._render(centre - leftward * cam.baseline / 2, forward)
+        centre = np.array([x + c * cam.mount_x, y + s * cam.mount_x, cam.mount_z])
+        left, depth = self._render(centre + leftward * cam.baseline / 2, forward, True)
+        right, _ = self._render(centre - leftward * cam.baseline / 2, forward, False)
         period = int(round(1e9 / cam.rate_hz))
-        r.next_frame_ns = max(r.next_frame_ns + period, self.time_ns + 1)
-        return StereoFrame(left, right, depth, self.time_ns)
+        self._next_frame_ns[i] = max(self._next_frame_ns[i] + period, self._time_ns + 1)
+        return StereoFrame(left, right, depth, self._time_ns, cam.encoding)
 
-    def laser_scan(self, name: str, num_beams: int = 181, fov: float = np.pi, max_range: float = 5.0,
-                   height: float = 0.3) -> np.ndarray:
-        """2D ray-cast ranges (num_beams,) [m] from base_link at ``height`` over ±fov/2;
-        max_range where nothing is hit (for fast exploration runs without rendering)."""
-        pose = self.ground_truth(name)
-        ang = pose[2] + np.linspace(-fov / 2, fov / 2, num_beams)
-        start = np.column_stack([np.full(num_beams, pose[0]), np.full(num_beams, pose[1]), np.full(num_beams, height)])
+    # ------------------------------------------------------------------ other sensors
+    def laser_scan(self, name: str, num_beams: int = 181, fov: float = np.pi, max_range: float = 5.0) -> np.ndarray:
+        """A 2D pseudo-laser by ray casting against the collision shapes (no rendering).
+
+        Beams from base_link at ``config.laser_height``, angles −fov/2 … fov/2 from base_link's x
+        axis, counter-clockwise (as sensor_msgs/LaserScan with angle_min = −fov/2). The robot's
+        own body is not seen (rays that start inside a shape ignore it); other robots are.
+
+        Returns:
+            (num_beams,) ranges [m]; ``max_range`` where nothing is hit.
+        """
+        if num_beams < 1 or max_range <= 0 or not 0 < fov <= 2 * np.pi:
+            raise SimError("laser_scan: need num_beams >= 1, max_range > 0 and 0 < fov <= 2π")
+        x, y, th = self._truth[self._index(name)]
+        ang = th + np.linspace(-fov / 2, fov / 2, num_beams)
+        start = np.column_stack([np.full(num_beams, x), np.full(num_beams, y), np.full(num_beams, self.config.laser_height)])
         end = start + np.column_stack([np.cos(ang), np.sin(ang), np.zeros(num_beams)]) * max_range
-        hits = p.rayTestBatch(start.tolist(), end.tolist(), physicsClientId=self.client)
-        frac = np.array([h[2] if h[0] not in (-1, self.robots[name].body) else 1.0 for h in hits])
+        frac = np.ones(num_beams)
+        for k in range(0, num_beams, 16384):  # pybullet's batch limit
+            hits = p.rayTestBatch(start[k:k + 16384].tolist(), end[k:k + 16384].tolist(), physicsClientId=self.client)
+            frac[k:k + len(hits)] = [h[2] if h[0] >= 0 else 1.0 for h in hits]
         return frac * max_range
 
     def close(self) -> None:
-        """Disconnect the physics client."""
+        """Disconnect the physics client and delete the texture files."""
         if self.client is not None and p.isConnected(self.client):
             p.disconnect(self.client)
         self.client = None
+        self._tmp.cleanup()
 
     def __enter__(self) -> "Simulation":
         return self
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.close()

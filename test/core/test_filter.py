@@ -149,3 +149,29 @@ def test_delayed_initialisation_keeps_candidates_out_of_the_weights():
         slam.step([RobotUpdate("a", t, np.zeros(3), _obs("a", t, pt))])
     (count,) = slam.landmarks.gather(np.zeros(1, int), np.zeros(1, int), ("count",))
     assert slam.landmarks.size == 1 and count[0] == 4  # one slot, promoted after 3 observations
+
+
+def test_candidate_is_promoted_after_exactly_nz_min_sightings():
+    cfg = FilterConfig(num_particles=5, seed=9, association=AssociationConfig(min_observations=3))
+    slam = MultiRobotFastSLAM(cfg, ["a"], np.zeros((1, 3)))
+    pt = np.array([[3.0, 0.5, 1.0]])
+    cov = np.eye(3) * 0.01
+    log_p0 = -0.5 * (cfg.association.mahalanobis_gate + 3 * np.log(2 * np.pi) + np.log(np.linalg.det(cov)))
+    increments = []
+    for t in range(1, 6):
+        before = slam.score.copy()
+        slam.step([RobotUpdate("a", t, np.zeros(3), _obs("a", t, pt))])
+        increments.append(slam.score - before)
+    # sightings 1-3: new landmark, then a candidate: the weight factor is p0 in every particle
+    for inc in increments[:3]:
+        np.testing.assert_allclose(inc, log_p0)
+    # from sighting 4 on it is a landmark and the observation likelihood weights the particle
+    assert not np.allclose(increments[3], log_p0)
+    assert np.all(increments[3] > log_p0)  # a perfect re-observation beats "new"
+
+
+def test_hungarian_leaves_fewer_duplicates_than_ml_on_the_ambiguous_world():
+    from mrslam_core.experiments.association import ambiguous_run
+
+    dup = {mode: sum(ambiguous_run(mode, seed, 30)["duplicated_fraction"] for seed in (5, 7)) for mode in ("ml", "hungarian")}
+    assert dup["hungarian"] < dup["ml"], dup
