@@ -99,6 +99,7 @@ class Simulation:
         self._fx = cam.width / (2.0 * np.tan(np.radians(cam.hfov_deg) / 2))
         vfov = 2 * np.degrees(np.arctan(cam.height / (2 * self._fx)))
         self._proj = p.computeProjectionMatrixFOV(vfov, cam.width / cam.height, cam.near, cam.far)
+        self._ss = cam.supersample
 
     # ------------------------------------------------------------------ robots
     @property
@@ -263,14 +264,18 @@ class Simulation:
     def camera_infos(self) -> tuple[CameraCalibration, CameraCalibration]:
         """CameraInfo data of the left and right renderings (already rectified: D = 0, R = I).
 
-        K = [[f, 0, W/2], [0, f, H/2 − 1], [0, 0, 1]] with f = W / (2 tan(hfov/2)): TinyRenderer
-        samples pixel (u, v) at window coordinates (u, H − 1 − v), not at pixel centres; the
-        test against the rendered depth of a slanted wall and the floor pins this down.
+        K = [[f, 0, W/2 − a], [0, f, H/2 − 1/s − a], [0, 0, 1]] with f = W / (2 tan(hfov/2)),
+        s = supersample and a = (s − 1)/(2s): TinyRenderer samples pixel (u, v) at window
+        coordinates (u, H − 1 − v), not at pixel centres, and averaging s × s blocks moves the
+        sample to the block's middle; the test against the rendered depth of a slanted wall and
+        the floor pins this down.
         P = [K | 0] for the left camera, P[0, 3] = −f·baseline for the right one (ROS).
         """
         cam = self.config.camera
         f = self._fx
-        k = np.array([[f, 0.0, cam.width / 2], [0.0, f, cam.height / 2 - 1.0], [0.0, 0.0, 1.0]])
+        s = self._ss
+        a = (s - 1) / (2 * s)
+        k = np.array([[f, 0.0, cam.width / 2 - a], [0.0, f, cam.height / 2 - 1 / s - a], [0.0, 0.0, 1.0]])
         pl = np.hstack([k, np.zeros((3, 1))])
         pr = pl.copy()
         pr[0, 3] = -f * cam.baseline
@@ -281,19 +286,25 @@ class Simulation:
 
     def _render(self, eye: np.ndarray, forward: np.ndarray, want_depth: bool) -> tuple[np.ndarray, np.ndarray | None]:
         cam = self.config.camera
+        s = self._ss
+        w, h = cam.width * s, cam.height * s
         view = p.computeViewMatrix(eye.tolist(), (eye + forward).tolist(), [0, 0, 1])
         # ambient + diffuse only: a specular term depends on the eye and would differ between the cameras
         _, _, rgba, depth, _ = p.getCameraImage(
-            cam.width, cam.height, view, self._proj, renderer=p.ER_TINY_RENDERER, shadow=0,
+            w, h, view, self._proj, renderer=p.ER_TINY_RENDERER, shadow=0,
             lightDirection=[0.4, 0.6, 1.0], lightAmbientCoeff=0.6, lightDiffuseCoeff=0.45, lightSpecularCoeff=0.0,
             flags=p.ER_NO_SEGMENTATION_MASK, physicsClientId=self.client)
-        rgb = np.asarray(rgba, np.uint8).reshape(cam.height, cam.width, 4)[..., :3]
+        rgb = np.asarray(rgba, np.uint8).reshape(h, w, 4)[..., :3]
+        if s > 1:
+            rgb = rgb.reshape(cam.height, s, cam.width, s, 3).mean(axis=(1, 3)).round().astype(np.uint8)
         img = np.ascontiguousarray(rgb) if cam.encoding == "rgb8" else ((rgb.astype(np.uint16) @ _LUMA) >> 8).astype(np.uint8)
         if not want_depth:
             return img, None
         # OpenGL depth buffer b ∈ [0, 1] to z-depth: z = f·n / (f − (f − n)·b)
-        b = np.asarray(depth, np.float64).reshape(cam.height, cam.width)
+        b = np.asarray(depth, np.float64).reshape(h, w)
         z = cam.far * cam.near / (cam.far - (cam.far - cam.near) * b)
+        if s > 1:
+            z = z.reshape(cam.height, s, cam.width, s).mean(axis=(1, 3))
         return img, z.astype(np.float32)
 
     def render_stereo(self, name: str) -> StereoFrame:

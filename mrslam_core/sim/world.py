@@ -171,9 +171,10 @@ class World:
         inside = (ij[:, 0] >= 0) & (ij[:, 0] < h) & (ij[:, 1] >= 0) & (ij[:, 1] < w)
         keep = np.unique(labels[ij[inside, 0], ij[inside, 1]])
         reach = np.isin(labels, keep[keep > 0])
-        r = int(np.ceil(robot_radius / resolution))
+        grow = robot_radius + resolution  # one cell more: cell centres sit up to a cell from the solids
+        r = int(np.ceil(grow / resolution))
         yy, xx = np.mgrid[-r:r + 1, -r:r + 1]
-        disk = (yy ** 2 + xx ** 2) * resolution ** 2 <= robot_radius ** 2
+        disk = (yy ** 2 + xx ** 2) * resolution ** 2 <= grow ** 2
         return ndimage.binary_dilation(reach, structure=disk) & ~occ
 
 

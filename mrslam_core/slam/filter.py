@@ -297,12 +297,14 @@ class MultiRobotFastSLAM:
         vb, vc = np.nonzero(cand >= 0)  # the V (observation, candidate) pairs worth scoring
         vslots = cand[vb, vc]
         if vb.size:
-            mu, sig, held, count, score = store.gather(
-                np.arange(m)[:, None], vslots[None], ("mean", "cov", "exists", "count", "score")
-            )  # (M, V, ...)
+            mu, sig, held = store.gather(np.arange(m)[:, None], vslots[None], ("mean", "cov", "exists"))
+            if cfg.min_observations > 1:
+                (count,) = store.gather(np.arange(m)[:, None], vslots[None], ("count",))
+                confirmed = count >= cfg.min_observations
+            else:
+                confirmed = held
             p_cov = None if motion_cov is None else motion_cov[:, None]
             maha, log_norm = model.score(poses[:, None, :], z[vb][None], r[vb][None], mu, sig, p_cov)
-            confirmed = count >= cfg.min_observations
             feasible = held & (maha <= cfg.mahalanobis_gate)
             if cfg.mode == "ml":
                 geo = cfg.geometry_weight * cfg.descriptor_gate / cfg.mahalanobis_gate
@@ -336,9 +338,10 @@ class MultiRobotFastSLAM:
                     k, mi[conf], z[bi[conf]], r[bi[conf]], mu_s[conf], sig_s[conf], motion_cov, log_l
                 )
             new_mu, new_cov, d_sel, norm_sel = model.update(poses[mi], z[bi], r[bi], mu_s, sig_s)
+            count, score = store.gather(mi, slots, ("count", "score"))
             store.write(
-                mi, slots, mean=new_mu, cov=new_cov, count=count[mi, pv] + 1,
-                score=np.minimum(score[mi, pv] + 1, self.config.existence.max_score),
+                mi, slots, mean=new_mu, cov=new_cov, count=count + 1,
+                score=np.minimum(score + 1, self.config.existence.max_score),
             )
             if motion_cov is None:
                 log_l += np.bincount(mi[conf], -0.5 * (d_sel[conf] + norm_sel[conf]), m)
