@@ -118,8 +118,9 @@ class Explorer:
         cfg = self.config
         for b, strike in zip(self.blacklist, self.strikes):
             if np.linalg.norm(b - target) < cfg.blacklist_radius:
-                strike[0] += 1
-                strike[1] = now + cfg.blacklist_period
+                if now >= strike[1]:  # robots failing together on one goal count once
+                    strike[0] += 1
+                    strike[1] = now + cfg.blacklist_period
                 return
         self.blacklist.append(np.asarray(target, float))
         self.strikes.append([1.0, now + cfg.blacklist_period])
