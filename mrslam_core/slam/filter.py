@@ -304,7 +304,7 @@ class MultiRobotFastSLAM:
             else:
                 confirmed = held
             p_cov = None if motion_cov is None else motion_cov[:, None]
-            maha, log_norm = model.score(poses[:, None, :], z[vb][None], r[vb][None], mu, sig, p_cov)
+            maha, log_norm = model.score(poses[:, None, :], z[None], r[None], mu, sig, p_cov, index=vb)
             feasible = held & (maha <= cfg.mahalanobis_gate)
             if cfg.mode == "ml":
                 geo = cfg.geometry_weight * cfg.descriptor_gate / cfg.mahalanobis_gate

@@ -50,17 +50,20 @@ class ObservationModel:
         lm, ginv = self.inverse(pose, z)
         return lm, ginv @ r @ _t(ginv)
 
-    def score(self, pose, z, r, mu, sig, pose_cov=None) -> tuple[np.ndarray, np.ndarray]:
+    def score(self, pose, z, r, mu, sig, pose_cov=None, index=None) -> tuple[np.ndarray, np.ndarray]:
         """Mahalanobis distance D (eq. 15) and log det(2πZ) for landmark/observation pairs.
 
         Args (leading axes broadcast, e.g. particles × pairs):
             pose: (..., 3); z: (..., dim); r: (..., dim, dim); mu: (..., dim);
             sig: (..., dim, dim); pose_cov: (..., 3, 3) uncertainty of the pose itself (the
-            FastSLAM 2.0 prediction), added as Hₓ P Hₓᵀ, or None.
+            FastSLAM 2.0 prediction), added as Hₓ P Hₓᵀ, or None; index: (V,) when z and r
+            are per observation (…, B, …) and the pairs pick observation ``index[v]``.
 
         Returns:
             (D (...), log det(2π Z) (...)).
         """
+        if index is not None:
+            z, r = z[..., index, :], r[..., index, :, :]
         zhat, g = self.predict(pose, mu)
         zmat = g @ sig @ _t(g) + r
         if pose_cov is not None:
@@ -140,11 +143,16 @@ class StereoPointModel(ObservationModel):
         jac[..., 1, 2] = -zhat[..., 0]
         return jac
 
-    def score(self, pose, z, r, mu, sig, pose_cov=None):
+    def score(self, pose, z, r, mu, sig, pose_cov=None, index=None):
         if pose_cov is not None:
-            return super().score(pose, z, r, mu, sig, pose_cov)
+            return super().score(pose, z, r, mu, sig, pose_cov, index)
+        # the observation in the map and its covariance there depend on (particle, observation)
+        # only: compute them for (M, B) and spread them over the V candidate pairs
         lm = self.to_map(pose, z)
-        maha, sdet = inv_quad_det(sig + rotate_z_sym3(r, pose[..., 2]), lm - mu)
+        r_map = rotate_z_sym3(r, pose[..., 2])
+        if index is not None:
+            lm, r_map = lm[..., index, :], r_map[..., index, :, :]
+        maha, sdet = inv_quad_det(sig + r_map, lm - mu)
         return maha, 3 * LOG_2PI + np.log(sdet)
 
     def update(self, pose, z, r, mu, sig):
