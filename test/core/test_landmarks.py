@@ -23,7 +23,7 @@ def test_random_operations_match_dense_reference():
         elif op == 1:
             key = np.unique(rng.integers(0, m * store.size, int(rng.integers(1, 15))))
             pm, ps = key // store.size, key % store.size
-            v = rng.standard_normal((key.size, dim))
+            v = rng.standard_normal((key.size, dim)).astype(np.float32)  # the pool stores float32
             store.write(pm, ps, mean=v, exists=True)
             ref_mean[pm, ps] = v
             ref_ex[pm, ps] = True
