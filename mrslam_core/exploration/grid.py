@@ -22,6 +22,18 @@ class Scan:
     ranges: np.ndarray
     hit: np.ndarray
 
+    @classmethod
+    def from_obstacle_scan(cls, scan) -> "Scan":
+        """From the stereo frontend's pseudo laser scan (mrslam_core.frontend.obstacles.ObstacleScan):
+        a bin with an obstacle ends in a hit at its range; a bin without one proves free space up
+        to its known-free range; bins with nothing known are left out."""
+        n = scan.ranges.size
+        bearings = scan.angle_min + (np.arange(n) + 0.5) * scan.angle_increment
+        hit = np.isfinite(scan.ranges) & (scan.ranges <= scan.range_max)
+        ranges = np.where(hit, scan.ranges, np.minimum(scan.free_ranges, scan.range_max))
+        keep = hit | (ranges > 0)
+        return cls(bearings[keep], ranges[keep], hit[keep])
+
 
 class OccupancyGrid:
     """Log-odds grid (H, W) float32; probability = 1 / (1 + exp(−log-odds)); 0.5 = unknown."""

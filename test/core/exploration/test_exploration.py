@@ -91,3 +91,17 @@ def test_seeded_run_explores_small_world_and_stops():
     assert curve[-1][1] >= 0.9
     assert sim.explorer.state is State.COMPLETE
     assert curve[-1][0] < 300  # stopped by itself, did not run out of time
+
+
+def test_grid_from_the_frontends_obstacle_scan():
+    from mrslam_core.frontend.obstacles import ObstacleScan
+
+    obs = ObstacleScan(stamp_ns=0, angle_min=-0.1, angle_increment=0.1, ranges=np.array([1.0, np.inf]),
+                       free_ranges=np.array([1.0, 2.0]), range_max=4.0, points=np.zeros((1, 2)))
+    scan = Scan.from_obstacle_scan(obs)
+    np.testing.assert_allclose(scan.bearings, [-0.05, 0.05])
+    np.testing.assert_allclose(scan.ranges, [1.0, 2.0])
+    assert scan.hit.tolist() == [True, False]
+    grid = OccupancyGrid(GridConfig(resolution=0.1, size=(4.0, 4.0), origin=(-2.0, -2.0)))
+    grid.insert(np.zeros(3), scan)
+    assert grid.occupied().sum() == 1 and grid.free().sum() > 20
