@@ -48,6 +48,8 @@ class ExplorationConfig:
         blacklist_radius: frontier cells within this of a blacklisted goal are skipped [m].
         blacklist_period: a failed goal is skipped for this long, then tried again [s].
         max_strikes: after this many failures at one place it is skipped for good.
+        recovery_time, recovery_speed: a robot that made no headway backs up this long at this
+            speed before its next goal (a wedged robot frees itself) [s, m/s].
         return_to_start: drive back to the start pose once exploration is complete.
         max_speed, max_turn_rate: path follower limits [m/s, rad/s].
         lookahead: pure-pursuit lookahead distance [m].
@@ -65,6 +67,8 @@ class ExplorationConfig:
     progress_timeout: float = 8.0
     blacklist_radius: float = 0.5
     blacklist_period: float = 30.0
+    recovery_time: float = 2.0
+    recovery_speed: float = 0.15
     max_strikes: int = 3
     return_to_start: bool = False
     max_speed: float = 0.5

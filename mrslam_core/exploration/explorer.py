@@ -48,6 +48,7 @@ class Explorer:
     last_plan_s: float = -np.inf
     plans: int = 0
     checkpoints: dict[str, tuple[np.ndarray, float]] = field(default_factory=dict)
+    recovering_until: dict[str, float] = field(default_factory=dict)
 
     def _replan(self, grid: OccupancyGrid, poses: dict[str, np.ndarray], now: float) -> None:
         cfg = self.config
@@ -148,6 +149,7 @@ class Explorer:
                 self._strike(g.target, now)
                 self.goals[name] = None
                 self.checkpoints[name] = (poses[name][:2].copy(), now)
+                self.recovering_until[name] = now + cfg.recovery_time  # back off before the next goal
                 due = True
         if due and self.state is not State.COMPLETE:
             grid_ok = grid.observed.any()
@@ -156,6 +158,9 @@ class Explorer:
         commands = {}
         for name in self.robots:
             g = self.goals.get(name)
+            if now < self.recovering_until.get(name, -np.inf) and self.state is not State.COMPLETE:
+                commands[name] = (-cfg.recovery_speed, 0.0)
+                continue
             if g is None or self.state is State.COMPLETE:
                 commands[name] = (0.0, 0.0)
                 continue
