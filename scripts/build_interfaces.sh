@@ -14,6 +14,7 @@ if [ -f "$stamp" ] && [ "$stamp" -nt "$src/msg/TFMessage.msg" ] && [ "$stamp" -n
 fi
 # The wheels' exported CMake targets name include folders of the machine that built them; point
 # them at this venv's Python and numpy headers.
+mkdir -p "$(dirname "$build")"
 pyinc="$("$py" -c 'import sysconfig; print(sysconfig.get_paths()["include"])')"
 npinc="$("$py" -c 'import numpy; print(numpy.get_include())')"
 grep -rl --include='*.cmake' -e '/opt/python/cp311-cp311' "$venv/share" "$venv/lib" 2>/dev/null | while read -r f; do
