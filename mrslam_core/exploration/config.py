@@ -44,6 +44,8 @@ class ExplorationConfig:
             unknown just behind a robot with a forward-looking sensor is not worth a goal) [m].
         goal_tolerance: a goal counts as reached within this distance [m].
         replan_period: re-assign targets at least this often [s].
+        replan_new_area: re-assign sooner (at most once a second) when this much new area has
+            been mapped since the last assignment [m²].
         progress_timeout: a goal with no progress for this long is blacklisted [s].
         blacklist_radius: frontier cells within this of a blacklisted goal are skipped [m].
         blacklist_period: a failed goal is skipped for this long, then tried again [s].
@@ -64,6 +66,7 @@ class ExplorationConfig:
     min_target_distance: float = 1.0
     goal_tolerance: float = 0.4
     replan_period: float = 4.0
+    replan_new_area: float = 4.0
     progress_timeout: float = 8.0
     blacklist_radius: float = 0.5
     blacklist_period: float = 30.0

@@ -49,6 +49,7 @@ class Explorer:
     plans: int = 0
     checkpoints: dict[str, tuple[np.ndarray, float]] = field(default_factory=dict)
     recovering_until: dict[str, float] = field(default_factory=dict)
+    known_at_plan: int = 0
 
     def _replan(self, grid: OccupancyGrid, poses: dict[str, np.ndarray], now: float) -> None:
         cfg = self.config
@@ -57,6 +58,7 @@ class Explorer:
         frontier = frontier_cells(free, known)
         self.plans += 1
         self.last_plan_s = now
+        self.known_at_plan = int(grid.observed.sum())
         passable = ~inflate(grid.occupied(), cfg.robot_radius / grid.res)
         frontier &= passable  # a frontier the robot cannot stand on (hugging a wall) is not a goal
         waiting = False  # a frontier blocked only for now will be tried again: not complete yet
@@ -132,6 +134,9 @@ class Explorer:
         for name in self.robots:
             self.starts.setdefault(name, np.asarray(poses[name], float).copy())
         due = now - self.last_plan_s >= cfg.replan_period
+        known = int(grid.observed.sum())
+        if known - self.known_at_plan > cfg.replan_new_area / grid.res**2 and now - self.last_plan_s >= 1.0:
+            due = True  # the map changed: frontiers may have moved
         for name in self.robots:
             g = self.goals.get(name)
             if g is None:
