@@ -15,7 +15,9 @@ class MotionConfig:
     ``alpha1·rot1² + alpha2·trans²`` (rotations) and ``alpha3·trans² + alpha4·(rot1² + rot2²)``
     (translation), plus a random walk of density ``sigma_xy_rw`` [m/√s] and ``sigma_theta_rw``
     [rad/√s] over the update's time span, so noise does not depend on how often a robot updates
-    and a still robot keeps some spread.
+    and a still robot keeps some spread, plus variances proportional to the distance travelled and
+    the angle turned (``var_*_per_m``, ``var_theta_per_rad``: the wheel-odometry model of 002
+    Table I and of the simulator, whose statistics do not depend on the update rate either).
     """
 
     alpha1: float = 0.01  # rad²/rad²
@@ -25,9 +27,12 @@ class MotionConfig:
     min_translation: float = 0.01  # m; below it rot1 = 0 (see motion.decompose)
     sigma_xy_rw: float = 0.0  # m/√s
     sigma_theta_rw: float = 0.0  # rad/√s
+    var_xy_per_m: float = 0.0  # m²/m, each of x and y in the robot frame
+    var_theta_per_m: float = 0.0  # rad²/m
+    var_theta_per_rad: float = 0.0  # rad²/rad
 
     def __post_init__(self) -> None:
-        for name in ("alpha1", "alpha2", "alpha3", "alpha4", "min_translation", "sigma_xy_rw", "sigma_theta_rw"):
+        for name in ("alpha1", "alpha2", "alpha3", "alpha4", "min_translation", "sigma_xy_rw", "sigma_theta_rw", "var_xy_per_m", "var_theta_per_m", "var_theta_per_rad"):
             if getattr(self, name) < 0:
                 raise ValueError(f"{name} must be >= 0")
 

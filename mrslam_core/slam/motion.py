@@ -49,10 +49,19 @@ def sample_motion(
     tr = trans + s_trans * noise[:, 1]
     r2 = rot2 + s_rot2 * noise[:, 2]
     step = np.stack([tr * np.cos(r1), tr * np.sin(r1), r1 + r2], axis=-1)
-    if dt > 0 and (cfg.sigma_xy_rw > 0 or cfg.sigma_theta_rw > 0):
-        walk = np.array([cfg.sigma_xy_rw, cfg.sigma_xy_rw, cfg.sigma_theta_rw]) * np.sqrt(dt)
-        step += rng.standard_normal((m, 3)) * walk
+    sd = np.sqrt(_walk_variance(cfg, trans, rot1 + rot2, dt))
+    if sd.any():
+        step += rng.standard_normal((m, 3)) * sd
     return compose(poses, step)
+
+
+def _walk_variance(cfg: MotionConfig, trans: float, turn: float, dt: float) -> np.ndarray:
+    """Variances (3,) of the noise added in the robot frame on top of the (rot1, trans, rot2)
+    model: time random walk plus distance- and angle-proportional terms."""
+    t = max(dt, 0.0)
+    d, a = abs(trans), abs(float(wrap_angle(turn)))
+    var_xy = cfg.sigma_xy_rw**2 * t + cfg.var_xy_per_m * d
+    return np.array([var_xy, var_xy, cfg.sigma_theta_rw**2 * t + cfg.var_theta_per_m * d + cfg.var_theta_per_rad * a])
 
 
 def predict_motion(
@@ -85,6 +94,5 @@ def predict_motion(
     jac[:, 1, 1] = s
     jac[:, 2, 2] = 1.0
     cov = (jac * var[None, None, :]) @ np.swapaxes(jac, 1, 2)
-    walk = np.array([cfg.sigma_xy_rw, cfg.sigma_xy_rw, cfg.sigma_theta_rw]) ** 2 * max(dt, 0.0)
-    cov += np.diag(walk + 1e-12)
+    cov += np.diag(_walk_variance(cfg, trans, rot1 + rot2, dt) + 1e-12)
     return compose(poses, np.array([trans * np.cos(rot1), trans * np.sin(rot1), rot1 + rot2])), cov
