@@ -1,0 +1,132 @@
+"""The simulated team as a ROS node: /clock, and per robot stereo images with camera_info, wheel
+odometry, ground truth and odom -> base_link on /tf; drives from ``/<robot>/cmd_vel``.
+
+The simulation advances ``steps_per_tick`` physics steps per timer tick; with ``real_time_factor``
+> 0 the tick period follows the wall clock, with 0 it runs as fast as it can. Nodes that should
+follow the simulated time run with ``use_sim_time:=true``.
+"""
+
+from __future__ import annotations
+
+import sys
+from dataclasses import dataclass, field
+
+import numpy as np
+import rclpy
+from geometry_msgs.msg import Twist
+from nav_msgs.msg import Odometry
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import CameraInfo, Image
+from tf2_msgs.msg import TFMessage
+
+from mrslam_core.sim.config import SimConfig
+from mrslam_core.sim.simulation import Simulation
+from mrslam_ros.conversions import array_to_image, calibration_to_camera_info, ns_to_stamp, pose_to_msg, transform_msg
+from mrslam_ros.params import declare_config, read_config
+
+
+@dataclass(frozen=True)
+class SimNodeConfig:
+    """The simulator node.
+
+    Attributes:
+        robots: number of robots (named robot1..robotK, placed at the world's start poses).
+        real_time_factor: simulated seconds per wall second (0: as fast as possible).
+        steps_per_tick: physics steps per timer tick.
+        sim: the simulation.
+    """
+
+    robots: int = 1
+    real_time_factor: float = 1.0
+    steps_per_tick: int = 5
+    sim: SimConfig = field(default_factory=SimConfig)
+
+
+class SimNode(Node):
+    """Thin wrapper: step the core simulation, convert, publish."""
+
+    def __init__(self, name: str = "sim", **kwargs):
+        super().__init__(name, **kwargs)
+        declare_config(self, SimNodeConfig())
+        self.cfg = read_config(self, SimNodeConfig)
+        self.sim = Simulation(self.cfg.sim)
+        self.names = [f"robot{i + 1}" for i in range(self.cfg.robots)]
+        for n in self.names:
+            self.sim.add_robot(n)
+        self.left_cal, self.right_cal = self.sim.camera_infos()
+        self.clock_pub = self.create_publisher(Clock, "/clock", 10)
+        self.tf_pub = self.create_publisher(TFMessage, "/tf", 100)
+        self.pubs = {}
+        for n in self.names:
+            self.pubs[n] = {
+                "left": self.create_publisher(Image, f"/{n}/stereo/left/image_raw", 5),
+                "right": self.create_publisher(Image, f"/{n}/stereo/right/image_raw", 5),
+                "left_info": self.create_publisher(CameraInfo, f"/{n}/stereo/left/camera_info", 5),
+                "right_info": self.create_publisher(CameraInfo, f"/{n}/stereo/right/camera_info", 5),
+                "odom": self.create_publisher(Odometry, f"/{n}/odom", 50),
+                "truth": self.create_publisher(Odometry, f"/{n}/ground_truth", 50),
+            }
+            self.create_subscription(Twist, f"/{n}/cmd_vel", lambda m, n=n: self.on_cmd(n, m), 10)
+        dt = self.cfg.steps_per_tick / self.cfg.sim.physics_hz
+        period = dt / self.cfg.real_time_factor if self.cfg.real_time_factor > 0 else 1e-3
+        self.create_timer(period, self.tick)
+
+    def on_cmd(self, name: str, msg: Twist) -> None:
+        try:
+            self.sim.set_command(name, float(msg.linear.x), float(msg.angular.z))
+        except ValueError:
+            self.get_logger().warn(f"{name}: unusable cmd_vel dropped", throttle_duration_sec=5.0)
+
+    def tick(self) -> None:
+        for _ in range(self.cfg.steps_per_tick):
+            self.sim.step()
+        now = self.sim.time_ns
+        stamp = ns_to_stamp(now)
+        self.clock_pub.publish(Clock(clock=stamp))
+        transforms = []
+        for n in self.names:
+            pose, twist = self.sim.odometry(n)
+            odom = Odometry()
+            odom.header.stamp = stamp
+            odom.header.frame_id, odom.child_frame_id = f"{n}/odom", f"{n}/base_link"
+            odom.pose.pose = pose_to_msg(pose)
+            odom.twist.twist.linear.x, odom.twist.twist.angular.z = float(twist[0]), float(twist[1])
+            self.pubs[n]["odom"].publish(odom)
+            truth = Odometry()
+            truth.header.stamp = stamp
+            truth.header.frame_id, truth.child_frame_id = "map", f"{n}/base_link"
+            truth.pose.pose = pose_to_msg(self.sim.ground_truth(n))
+            self.pubs[n]["truth"].publish(truth)
+            transforms.append(transform_msg(pose, now, f"{n}/odom", f"{n}/base_link"))
+        self.tf_pub.publish(TFMessage(transforms=transforms))
+        for n in self.sim.frames_due():
+            frame = self.sim.render_stereo(n)
+            p = self.pubs[n]
+            enc = "mono8" if frame.left.ndim == 2 else "rgb8"
+            p["left_info"].publish(calibration_to_camera_info(self.left_cal, frame.stamp_ns, f"{n}/camera_left_optical"))
+            p["right_info"].publish(calibration_to_camera_info(self.right_cal, frame.stamp_ns, f"{n}/camera_right_optical"))
+            p["left"].publish(array_to_image(frame.left, enc, frame.stamp_ns, f"{n}/camera_left_optical"))
+            p["right"].publish(array_to_image(frame.right, enc, frame.stamp_ns, f"{n}/camera_right_optical"))
+
+    def destroy_node(self) -> None:
+        self.sim.close()
+        super().destroy_node()
+
+
+def main(argv: list[str] | None = None) -> int:
+    rclpy.init(args=argv if argv is not None else sys.argv)
+    node = SimNode()
+    try:
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
