@@ -3,7 +3,6 @@ stereo images with camera_info come out."""
 
 import time
 
-import numpy as np
 import pytest
 
 pytestmark = pytest.mark.ros
