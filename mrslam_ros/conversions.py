@@ -11,7 +11,7 @@ import numpy as np
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Pose, PoseStamped, PoseWithCovarianceStamped, TransformStamped
 from nav_msgs.msg import OccupancyGrid, Odometry, Path
-from sensor_msgs.msg import CameraInfo, Image, PointCloud2, PointField
+from sensor_msgs.msg import CameraInfo, Image, LaserScan, PointCloud2, PointField
 
 from mrslam_core.frontend.camera import CameraCalibration
 from mrslam_core.geometry.se2 import quaternion_to_yaw, yaw_to_quaternion
@@ -248,3 +248,42 @@ def occupancy_msg(prob: np.ndarray, known: np.ndarray, origin: np.ndarray, resol
     msg.info.origin.orientation.w = 1.0
     msg.data = data.ravel().tolist()
     return msg
+
+
+# ----------------------------------------------------------------------------- scans
+def obstacle_scan_to_laser(scan, frame_id: str) -> LaserScan:
+    """The frontend's pseudo laser scan (ObstacleScan) -> sensor_msgs/LaserScan.
+
+    Bins with an obstacle carry its range; bins known free up to some distance carry +inf when that
+    is the full range and otherwise the known-free range in ``intensities`` (0 where unknown), so
+    the free-space information survives the message.
+    """
+    msg = LaserScan()
+    msg.header.stamp = ns_to_stamp(scan.stamp_ns)
+    msg.header.frame_id = frame_id
+    msg.angle_min = float(scan.angle_min)
+    msg.angle_increment = float(scan.angle_increment)
+    msg.angle_max = float(scan.angle_min + scan.angle_increment * (scan.ranges.size - 1))
+    msg.range_min = 0.0
+    msg.range_max = float(scan.range_max)
+    msg.ranges = np.where(np.isfinite(scan.ranges), scan.ranges, np.inf).astype(np.float32).tolist()
+    msg.intensities = np.asarray(scan.free_ranges, np.float32).tolist()
+    return msg
+
+
+def laser_to_scan(msg: LaserScan):
+    """sensor_msgs/LaserScan -> the exploration grid's Scan (bearings, ranges, hit).
+
+    Finite ranges within range_max are hits; other beams count as free up to the known-free range
+    in ``intensities`` when present, else up to range_max.
+    """
+    from mrslam_core.exploration.grid import Scan
+
+    ranges = np.asarray(msg.ranges, float)
+    n = ranges.size
+    bearings = msg.angle_min + (np.arange(n) + 0.5) * msg.angle_increment
+    hit = np.isfinite(ranges) & (ranges >= msg.range_min) & (ranges <= msg.range_max)
+    free = np.asarray(msg.intensities, float) if len(msg.intensities) == n else np.full(n, msg.range_max)
+    out = np.where(hit, ranges, np.minimum(free, msg.range_max))
+    keep = hit | (out > 0)
+    return Scan(bearings[keep], out[keep], hit[keep])

@@ -3,7 +3,8 @@
 Subscribes ``stereo/{left,right}/image_raw`` and ``stereo/{left,right}/camera_info``, pairs left and
 right images whose stamps differ by at most ``max_skew_ns`` (message_filters is not on PyPI:
 the pairing is this node's), runs :class:`mrslam_core.frontend.frontend.Frontend`, and publishes
-``observations`` (PointCloud2 in ``<robot>/base_link``). Drops are counted, never raised:
+``observations`` (PointCloud2 in ``<robot>/base_link``) and ``scan`` (the pseudo laser scan for the
+occupancy grid, LaserScan in ``<robot>/base_link``). Drops are counted, never raised:
 missing camera_info, unpaired images, and whatever the frontend itself rejects.
 """
 
@@ -17,7 +18,7 @@ import numpy as np
 import rclpy
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
-from sensor_msgs.msg import CameraInfo, Image, PointCloud2
+from sensor_msgs.msg import CameraInfo, Image, LaserScan, PointCloud2
 
 from mrslam_core.frontend.camera import StereoRig
 from mrslam_core.frontend.config import FrontendConfig
@@ -26,6 +27,7 @@ from mrslam_ros.conversions import (
     ConversionError,
     camera_info_to_calibration,
     image_to_array,
+    obstacle_scan_to_laser,
     observations_to_cloud,
     stamp_to_ns,
 )
@@ -67,6 +69,7 @@ class FrontendNode(Node):
         self.frontend = None
         self._rig_key = None
         self.pub = self.create_publisher(PointCloud2, "observations", 10)
+        self.scan_pub = self.create_publisher(LaserScan, "scan", 10)
         for side in ("left", "right"):
             self.create_subscription(CameraInfo, f"stereo/{side}/camera_info", lambda m, s=side: self.infos.__setitem__(s, m), 10)
             self.create_subscription(Image, f"stereo/{side}/image_raw", lambda m, s=side: self.on_image(s, m), 10)
@@ -110,11 +113,13 @@ class FrontendNode(Node):
         except ConversionError:
             self.drops["bad_image"] += 1
             return
-        obs, _ = self.frontend.step(l_img, r_img, stamp_to_ns(left.header.stamp),
+        obs, scan = self.frontend.step(l_img, r_img, stamp_to_ns(left.header.stamp),
                                     right_stamp_ns=stamp_to_ns(right.header.stamp), encoding=left.encoding,
                                     right_encoding=right.encoding)
         if obs is not None and len(obs):
             self.pub.publish(observations_to_cloud(obs, f"{self.cfg.robot}/base_link"))
+        if scan is not None:
+            self.scan_pub.publish(obstacle_scan_to_laser(scan, f"{self.cfg.robot}/base_link"))
 
 
 def main(argv: list[str] | None = None) -> int:

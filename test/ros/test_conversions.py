@@ -123,3 +123,15 @@ def test_poses_paths_tf_grid():
     assert tf.child_frame_id == "robot1/odom" and tf.transform.translation.y == -2.0
     grid = occupancy_msg(np.array([[0.1, 0.9], [0.5, 0.5]]), np.array([[True, True], [True, False]]), np.zeros(2), 0.1, 0)
     assert list(grid.data) == [10, 90, 50, -1] and grid.info.width == 2
+
+
+def test_obstacle_scan_round_trip_keeps_free_space():
+    from mrslam_core.frontend.obstacles import ObstacleScan
+    from mrslam_ros.conversions import laser_to_scan, obstacle_scan_to_laser
+
+    obs = ObstacleScan(stamp_ns=7, angle_min=-0.1, angle_increment=0.1, ranges=np.array([1.0, np.inf, np.inf]),
+                       free_ranges=np.array([1.0, 2.5, 0.0]), range_max=4.0, points=np.zeros((1, 2)))
+    scan = laser_to_scan(obstacle_scan_to_laser(obs, "robot1/base_link"))
+    np.testing.assert_allclose(scan.bearings, [-0.05, 0.05])
+    np.testing.assert_allclose(scan.ranges, [1.0, 2.5])
+    assert scan.hit.tolist() == [True, False]

@@ -1,0 +1,119 @@
+"""The central exploration node: one occupancy grid for the team, coordinated frontier goals,
+and each robot's drive command (the path follower runs here, per robot).
+
+Subscribes ``/<robot>/scan`` (LaserScan in base_link from the frontend) and ``/<robot>/pose``
+(PoseWithCovarianceStamped in the map frame from the SLAM node); scans are inserted at the latest
+pose of their robot. Publishes ``/map`` (OccupancyGrid), ``/<robot>/cmd_vel`` and
+``/<robot>/goal`` on a timer.
+"""
+
+from __future__ import annotations
+
+import sys
+from collections import Counter
+from dataclasses import dataclass, field
+
+import numpy as np
+import rclpy
+from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped, Twist
+from nav_msgs.msg import OccupancyGrid
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from sensor_msgs.msg import LaserScan
+
+from mrslam_core.exploration.config import ExplorationConfig, GridConfig
+from mrslam_core.exploration.explorer import Explorer
+from mrslam_core.exploration.grid import OccupancyGrid as Grid
+from mrslam_ros.conversions import laser_to_scan, msg_to_pose, occupancy_msg, pose_to_msg, stamp_to_ns
+from mrslam_ros.params import declare_config, read_config
+
+
+@dataclass(frozen=True)
+class ExploreNodeConfig:
+    """The exploration node.
+
+    Attributes:
+        robots: robot names.
+        control_period: command period [s].
+        map_period: /map publication period [s].
+        map_frame: frame of the grid and the poses.
+    """
+
+    robots: tuple[str, ...] = ("robot1",)
+    control_period: float = 0.2
+    map_period: float = 2.0
+    map_frame: str = "map"
+    exploration: ExplorationConfig = field(default_factory=ExplorationConfig)
+    grid: GridConfig = field(default_factory=GridConfig)
+
+
+class ExploreNode(Node):
+    """Thin wrapper around :class:`Explorer` and the grid."""
+
+    def __init__(self, name: str = "explore", **kwargs):
+        super().__init__(name, **kwargs)
+        declare_config(self, ExploreNodeConfig())
+        self.cfg = read_config(self, ExploreNodeConfig)
+        self.grid = Grid(self.cfg.grid)
+        self.explorer = Explorer(self.cfg.exploration, list(self.cfg.robots))
+        self.poses: dict[str, np.ndarray] = {}
+        self.drops: Counter[str] = Counter()
+        self.cmd_pub = {r: self.create_publisher(Twist, f"/{r}/cmd_vel", 10) for r in self.cfg.robots}
+        self.goal_pub = {r: self.create_publisher(PoseStamped, f"/{r}/goal", 10) for r in self.cfg.robots}
+        self.map_pub = self.create_publisher(OccupancyGrid, "/map", 1)
+        for r in self.cfg.robots:
+            self.create_subscription(PoseWithCovarianceStamped, f"/{r}/pose", lambda m, r=r: self.on_pose(r, m), 10)
+            self.create_subscription(LaserScan, f"/{r}/scan", lambda m, r=r: self.on_scan(r, m), 10)
+        self.create_timer(self.cfg.control_period, self.control)
+        self.create_timer(self.cfg.map_period, self.publish_map)
+        self.now_ns = 0
+
+    def on_pose(self, robot: str, msg: PoseWithCovarianceStamped) -> None:
+        pose = msg_to_pose(msg.pose.pose)
+        if not np.isfinite(pose).all():
+            self.drops["bad_pose"] += 1
+            return
+        self.poses[robot] = pose
+        self.now_ns = max(self.now_ns, stamp_to_ns(msg.header.stamp))
+
+    def on_scan(self, robot: str, msg: LaserScan) -> None:
+        if robot not in self.poses:
+            self.drops["scan_before_pose"] += 1
+            return
+        self.grid.insert(self.poses[robot], laser_to_scan(msg))
+
+    def control(self) -> None:
+        if len(self.poses) < len(self.cfg.robots):
+            return  # every robot must have a pose before targets are shared out
+        commands = self.explorer.step(self.grid, self.poses, self.now_ns * 1e-9)
+        for robot, (v, w) in commands.items():
+            twist = Twist()
+            twist.linear.x, twist.angular.z = float(v), float(w)
+            self.cmd_pub[robot].publish(twist)
+            goal = self.explorer.goals.get(robot)
+            if goal is not None:
+                msg = PoseStamped()
+                msg.header.frame_id = self.cfg.map_frame
+                msg.pose = pose_to_msg(np.array([goal.target[0], goal.target[1], 0.0]))
+                self.goal_pub[robot].publish(msg)
+
+    def publish_map(self) -> None:
+        self.map_pub.publish(occupancy_msg(self.grid.probability(), self.grid.observed, self.grid.origin,
+                                           self.grid.res, self.now_ns, self.cfg.map_frame))
+
+
+def main(argv: list[str] | None = None) -> int:
+    rclpy.init(args=argv if argv is not None else sys.argv)
+    node = ExploreNode()
+    try:
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
