@@ -11,8 +11,10 @@ DATA   ?= ../shared/data
 venv: $(STAMP)
 
 # ROS 2 Jazzy comes from PyPI wheels; tf2_msgs is not among them and is generated with the
-# wheels' rosidl generators (needs cmake, make and a C compiler).
-$(STAMP): pyproject.toml scripts/build_interfaces.sh mrslam_ros/interfaces/tf2_msgs/CMakeLists.txt
+# wheels' rosidl generators (needs cmake, make and a C compiler) into $(VENV)/ros_interfaces,
+# made importable by $(VENV)/lib/python3.11/site-packages/mrslam_interfaces.pth (see mrslam_ros/env.py).
+INTERFACES := $(wildcard mrslam_ros/interfaces/*/package.xml mrslam_ros/interfaces/*/CMakeLists.txt mrslam_ros/interfaces/*/msg/*.msg)
+$(STAMP): pyproject.toml scripts/build_interfaces.sh $(INTERFACES)
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet -e ".[ros,rosgen,test]"

@@ -7,11 +7,22 @@ so a node can count and drop a bad message instead of crashing.
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
+
 import numpy as np
 from builtin_interfaces.msg import Time
-from geometry_msgs.msg import Pose, PoseStamped, PoseWithCovarianceStamped, TransformStamped
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import (
+    Pose,
+    PoseArray,
+    PoseStamped,
+    PoseWithCovarianceStamped,
+    TransformStamped,
+)
 from nav_msgs.msg import OccupancyGrid, Odometry, Path
+from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import CameraInfo, Image, LaserScan, PointCloud2, PointField
+from visualization_msgs.msg import Marker, MarkerArray
 
 from mrslam_core.frontend.camera import CameraCalibration
 from mrslam_core.geometry.se2 import quaternion_to_yaw, yaw_to_quaternion
@@ -142,10 +153,21 @@ def cloud_to_observations(msg: PointCloud2, robot: str) -> ObservationSet:
         raise ConversionError("big-endian clouds are not supported")
     n = int(msg.width) * int(msg.height)
     step = int(msg.point_step)
+    if n and step <= 0:
+        raise ConversionError(f"cloud of {n} points has point_step {step}")
+    row = int(msg.width) * step
+    row_step = int(msg.row_step) if msg.row_step else row
+    if row_step < row:
+        raise ConversionError(f"row_step {row_step} is shorter than width × point_step = {row}")
     raw = bytes(msg.data)
-    if len(raw) < n * step:
-        raise ConversionError(f"cloud data has {len(raw)} bytes, {n} points of {step} need {n * step}")
-    buf = np.frombuffer(raw[: n * step], np.uint8).reshape(n, step)
+    need = row_step * (int(msg.height) - 1) + row if n else 0
+    if len(raw) < need:
+        raise ConversionError(f"cloud data has {len(raw)} bytes, {n} points of {step} need {need}")
+    if n == 0:
+        buf = np.zeros((0, max(step, 0)), np.uint8)
+    else:
+        rows = np.frombuffer(raw[: row_step * int(msg.height)].ljust(row_step * int(msg.height), b"\0"), np.uint8)
+        buf = rows.reshape(int(msg.height), row_step)[:, :row].reshape(n, step)
 
     def column(name: str, dtype, count: int = 1) -> np.ndarray:
         f = by_name[name]
@@ -154,8 +176,8 @@ def cloud_to_observations(msg: PointCloud2, robot: str) -> ObservationSet:
         if want is None or (dtype is float and want not in (np.float32, np.float64)) or (dtype is int and want not in (np.int32, np.uint32)):
             raise ConversionError(f"field {name} has datatype {f.datatype}")
         size = np.dtype(want).itemsize * f.count
-        if f.offset + size > step or (count and f.count != count):
-            raise ConversionError(f"field {name} does not fit the point step")
+        if f.count < 1 or f.offset + size > step or (count and f.count != count):
+            raise ConversionError(f"field {name} (offset {f.offset}, count {f.count}) does not fit the point step {step}")
         return buf[:, f.offset:f.offset + size].copy().view(want).reshape(n, f.count)
 
     z = np.hstack([column(c, float) for c in ("x", "y", "z")]).astype(float)
@@ -165,6 +187,8 @@ def cloud_to_observations(msg: PointCloud2, robot: str) -> ObservationSet:
     cov[:, _IU[1], _IU[0]] = tri
     tracks = column("track_id", int)[:, 0].astype(np.int64)
     desc = column("descriptor", float, 0).astype(np.float32) if "descriptor" in by_name else np.zeros((n, 0), np.float32)
+    if not (np.isfinite(z).all() and np.isfinite(tri).all()):
+        raise ConversionError("observation cloud has non-finite points or covariances")
     try:
         return ObservationSet(robot, stamp_to_ns(msg.header.stamp), z, cov, desc, tracks)
     except ValueError as exc:
@@ -287,3 +311,198 @@ def laser_to_scan(msg: LaserScan):
     out = np.where(hit, ranges, np.minimum(free, msg.range_max))
     keep = hit | (out > 0)
     return Scan(bearings[keep], out[keep], hit[keep])
+
+
+# ----------------------------------------------------------------------------- more time, poses, tf
+def clock_msg(stamp_ns: int) -> Clock:
+    """Sim time [ns] -> rosgraph_msgs/Clock (for /clock)."""
+    return Clock(clock=ns_to_stamp(int(stamp_ns)))
+
+
+def _planar_cov6(cov: np.ndarray) -> list[float]:
+    cov = np.asarray(cov, float)
+    if cov.shape != (3, 3):
+        raise ConversionError(f"planar covariance must be (3, 3), got {cov.shape}")
+    full = np.zeros((6, 6))
+    full[np.ix_([0, 1, 5], [0, 1, 5])] = cov
+    return full.ravel().tolist()
+
+
+def _cov6_to_planar(values, what: str) -> np.ndarray:
+    c = np.asarray(values, float)
+    if c.size != 36:
+        raise ConversionError(f"{what} covariance has {c.size} values, expected 36")
+    c = c.reshape(6, 6)[np.ix_([0, 1, 5], [0, 1, 5])]
+    if not np.isfinite(c).all():
+        raise ConversionError(f"{what} covariance is not finite")
+    return c
+
+
+def pose_to_odometry(pose: np.ndarray, cov: np.ndarray, stamp_ns: int, frame_id: str, child_frame_id: str,
+                     twist: tuple[float, float] | None = None) -> Odometry:
+    """Planar pose (x [m], y [m], θ [rad]) of ``child_frame_id`` in ``frame_id`` with its (3, 3)
+    covariance (and optionally the body twist (v [m/s], ω [rad/s])) -> nav_msgs/Odometry."""
+    msg = Odometry()
+    msg.header.stamp = ns_to_stamp(int(stamp_ns))
+    msg.header.frame_id, msg.child_frame_id = frame_id, child_frame_id
+    msg.pose.pose = pose_to_msg(np.asarray(pose, float))
+    msg.pose.covariance = _planar_cov6(cov)
+    if twist is not None:
+        msg.twist.twist.linear.x, msg.twist.twist.angular.z = float(twist[0]), float(twist[1])
+    return msg
+
+
+def pose_with_covariance_to_pose(msg: PoseWithCovarianceStamped) -> tuple[int, np.ndarray, np.ndarray]:
+    """PoseWithCovarianceStamped -> (stamp [ns], planar pose (3,), covariance (3, 3) of x, y, yaw)."""
+    pose = msg_to_pose(msg.pose.pose)
+    if not np.isfinite(pose).all():
+        raise ConversionError("pose is not finite")
+    return stamp_to_ns(msg.header.stamp), pose, _cov6_to_planar(msg.pose.covariance, "pose")
+
+
+def path_to_poses(msg: Path) -> tuple[np.ndarray, np.ndarray]:
+    """nav_msgs/Path -> (planar poses (N, 3), stamps (N,) int64 [ns])."""
+    poses = np.array([msg_to_pose(p.pose) for p in msg.poses]).reshape(-1, 3)
+    stamps = np.array([stamp_to_ns(p.header.stamp) for p in msg.poses], np.int64)
+    return poses, stamps
+
+
+def pose_array_msg(poses: np.ndarray, stamp_ns: int, frame_id: str) -> PoseArray:
+    """(M, 3) planar poses (e.g. one robot's particles) -> geometry_msgs/PoseArray."""
+    poses = np.asarray(poses, float)
+    if poses.ndim != 2 or poses.shape[1] != 3:
+        raise ConversionError(f"poses must be (M, 3), got {poses.shape}")
+    msg = PoseArray()
+    msg.header.stamp = ns_to_stamp(int(stamp_ns))
+    msg.header.frame_id = frame_id
+    msg.poses = [pose_to_msg(p) for p in poses]
+    return msg
+
+
+def pose_array_to_poses(msg: PoseArray) -> np.ndarray:
+    """geometry_msgs/PoseArray -> (M, 3) planar poses."""
+    return np.array([msg_to_pose(p) for p in msg.poses]).reshape(-1, 3)
+
+
+def transform_to_pose(msg: TransformStamped) -> tuple[int, str, str, np.ndarray]:
+    """TransformStamped -> (stamp [ns], parent frame, child frame, planar pose of child in parent)."""
+    t, q = msg.transform.translation, msg.transform.rotation
+    pose = np.array([t.x, t.y, float(quaternion_to_yaw(np.array([q.x, q.y, q.z, q.w])))])
+    if not np.isfinite(pose).all():
+        raise ConversionError(f"transform {msg.header.frame_id} -> {msg.child_frame_id} is not finite")
+    return stamp_to_ns(msg.header.stamp), msg.header.frame_id, msg.child_frame_id, pose
+
+
+def tf_message(transforms: Sequence[TransformStamped]):
+    """TransformStamped list -> tf2_msgs/TFMessage (for /tf and /tf_static).
+
+    Raises:
+        ConversionError: tf2_msgs was not generated (scripts/build_interfaces.sh).
+    """
+    try:
+        from tf2_msgs.msg import TFMessage
+    except ImportError as exc:
+        raise ConversionError(f"tf2_msgs is not importable ({exc}); run scripts/build_interfaces.sh") from exc
+    return TFMessage(transforms=list(transforms))
+
+
+# ----------------------------------------------------------------------------- grids
+def log_odds_to_occupancy(log_odds: np.ndarray, origin: np.ndarray, resolution: float, stamp_ns: int,
+                          frame_id: str = "map", unknown_abs: float = 1e-6) -> OccupancyGrid:
+    """(H, W) log-odds grid -> OccupancyGrid; cells with |log-odds| <= ``unknown_abs`` (never
+    updated) are unknown (−1). ``origin`` = (x, y[, θ]) of cell (0, 0)'s corner in ``frame_id`` [m]."""
+    lo = np.asarray(log_odds, float)
+    if lo.ndim != 2:
+        raise ConversionError(f"grid must be (H, W), got {lo.shape}")
+    prob = 1.0 / (1.0 + np.exp(-np.clip(lo, -50, 50)))
+    return occupancy_msg(prob, np.abs(lo) > unknown_abs, np.asarray(origin, float), resolution, stamp_ns, frame_id)
+
+
+def occupancy_to_arrays(msg: OccupancyGrid) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    """OccupancyGrid -> (probability (H, W) in [0, 1] (0.5 where unknown), known mask (H, W),
+    origin (x, y, θ) [m, rad], resolution [m/cell]). Row i is y = origin_y + (i + ½)·resolution."""
+    h, w = int(msg.info.height), int(msg.info.width)
+    data = np.asarray(msg.data, np.int8)
+    if data.size != h * w:
+        raise ConversionError(f"grid has {data.size} cells, header says {h}×{w}")
+    if not msg.info.resolution > 0:
+        raise ConversionError(f"grid resolution {msg.info.resolution} is not positive")
+    grid = data.reshape(h, w).astype(float)
+    known = grid >= 0
+    if (grid > 100).any():
+        raise ConversionError("grid values above 100")
+    o = msg.info.origin
+    yaw = float(quaternion_to_yaw(np.array([o.orientation.x, o.orientation.y, o.orientation.z, o.orientation.w])))
+    return np.where(known, grid / 100.0, 0.5), known, np.array([o.position.x, o.position.y, yaw]), float(msg.info.resolution)
+
+
+# ----------------------------------------------------------------------------- markers
+def landmark_markers(mean: np.ndarray, cov: np.ndarray, stamp_ns: int, frame_id: str = "map",
+                     ns: str = "landmarks", n_sigma: float = 2.0, rgba=(0.1, 0.6, 1.0, 0.6),
+                     min_size: float = 0.01) -> MarkerArray:
+    """Landmark means (N, 3) [m] and covariances (N, 3, 3) [m²] -> MarkerArray of ellipsoids.
+
+    The first marker is a DELETEALL (so landmarks removed from the map vanish); marker ``i + 1`` has
+    id ``i``, is centred on ``mean[i]``, oriented along the covariance's eigenvectors and has
+    diameters 2·n_sigma·√eigenvalue (at least ``min_size``).
+    """
+    from scipy.spatial.transform import Rotation
+
+    mean, cov = np.asarray(mean, float).reshape(-1, 3), np.asarray(cov, float)
+    if cov.shape != (len(mean), 3, 3):
+        raise ConversionError(f"cov must be ({len(mean)}, 3, 3), got {cov.shape}")
+    if not (np.isfinite(mean).all() and np.isfinite(cov).all()):
+        raise ConversionError("landmarks are not finite")
+    out = MarkerArray()
+    clear = Marker(ns=ns, action=Marker.DELETEALL)
+    clear.header.frame_id = frame_id
+    out.markers.append(clear)
+    if not len(mean):
+        return out
+    vals, vecs = np.linalg.eigh(0.5 * (cov + cov.transpose(0, 2, 1)))
+    vecs[np.linalg.det(vecs) < 0, :, 2] *= -1  # proper rotations
+    quats = Rotation.from_matrix(vecs).as_quat()  # x, y, z, w
+    sizes = np.maximum(2.0 * n_sigma * np.sqrt(np.clip(vals, 0.0, None)), min_size)
+    stamp = ns_to_stamp(int(stamp_ns))
+    for i in range(len(mean)):
+        m = Marker(ns=ns, id=i, type=Marker.SPHERE, action=Marker.ADD)
+        m.header.stamp, m.header.frame_id = stamp, frame_id
+        m.pose.position.x, m.pose.position.y, m.pose.position.z = (float(v) for v in mean[i])
+        m.pose.orientation.x, m.pose.orientation.y, m.pose.orientation.z, m.pose.orientation.w = (float(v) for v in quats[i])
+        m.scale.x, m.scale.y, m.scale.z = (float(v) for v in sizes[i])
+        m.color.r, m.color.g, m.color.b, m.color.a = (float(v) for v in rgba)
+        out.markers.append(m)
+    return out
+
+
+# ----------------------------------------------------------------------------- diagnostics
+LEVELS = {"ok": DiagnosticStatus.OK, "warn": DiagnosticStatus.WARN, "error": DiagnosticStatus.ERROR,
+          "stale": DiagnosticStatus.STALE}
+
+
+def diagnostics_msg(name: str, counters: Mapping[str, float], stamp_ns: int, level: str = "ok",
+                    message: str = "", hardware_id: str = "") -> DiagnosticArray:
+    """Named counters (drops by reason, latencies, ...) -> diagnostic_msgs/DiagnosticArray with one
+    status; keys sorted, values as text (integers without a decimal point)."""
+    if level not in LEVELS:
+        raise ConversionError(f"diagnostic level {level!r} not in {sorted(LEVELS)}")
+    status = DiagnosticStatus(level=LEVELS[level], name=name, message=message, hardware_id=hardware_id)
+    status.values = [KeyValue(key=str(k), value=str(int(v)) if float(v).is_integer() else f"{float(v):.6g}")
+                     for k, v in sorted(counters.items())]
+    msg = DiagnosticArray(status=[status])
+    msg.header.stamp = ns_to_stamp(int(stamp_ns))
+    return msg
+
+
+def diagnostics_to_counters(msg: DiagnosticArray) -> dict[str, dict[str, float]]:
+    """DiagnosticArray -> {status name: {key: value}} (values that are not numbers are skipped)."""
+    out: dict[str, dict[str, float]] = {}
+    for st in msg.status:
+        values = {}
+        for kv in st.values:
+            try:
+                values[kv.key] = float(kv.value)
+            except ValueError:
+                continue
+        out[st.name] = values
+    return out

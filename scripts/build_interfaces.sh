@@ -1,40 +1,86 @@
 #!/usr/bin/env bash
-# Generate the ROS 2 interface packages the PyPI wheels lack (tf2_msgs) into the venv, with the
-# rosidl generators from the wheels. Idempotent: does nothing when the install is up to date.
-#   usage: scripts/build_interfaces.sh [VENV]
+# Generate the ROS 2 interface packages the PyPI wheels lack (tf2_msgs, and any package under
+# mrslam_ros/interfaces/) with the rosidl generators from the wheels (the `rosgen` extra).
+#
+#   usage: scripts/build_interfaces.sh [VENV]        (default: .venv of this repository)
+#
+# Output: an install prefix VENV/ros_interfaces (lib/, share/, lib/python3.11/site-packages/),
+# built in build/interfaces/<pkg>. Nothing is written outside the repository and the venv.
+# Afterwards VENV/lib/python3.11/site-packages/mrslam_interfaces.pth makes `import tf2_msgs.msg`
+# work in every interpreter of the venv (see mrslam_ros/env.py for how), and mrslam_ros.env builds
+# the environment of node subprocesses. Idempotent: does nothing when the install is newer than
+# the sources (about 20 s otherwise). Needs cmake, make and a C/C++ compiler.
 set -euo pipefail
 here="$(cd "$(dirname "$0")/.." && pwd)"
 venv="$(cd "${1:-$here/.venv}" && pwd)"
 py="$venv/bin/python"
-src="$here/mrslam_ros/interfaces/tf2_msgs"
-build="$here/build/interfaces/tf2_msgs"
-stamp="$venv/.tf2_msgs.stamp"
-if [ -f "$stamp" ] && [ "$stamp" -nt "$src/msg/TFMessage.msg" ] && [ "$stamp" -nt "$src/CMakeLists.txt" ]; then
+prefix="$venv/ros_interfaces"
+stamp="$prefix/.built"
+srcroot="$here/mrslam_ros/interfaces"
+packages=(tf2_msgs)
+
+# up to date? (every source file older than the stamp, and the .pth in place)
+site="$("$py" -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])')"
+if [ -f "$stamp" ] && [ -f "$site/mrslam_interfaces.pth" ] \
+   && [ -z "$(find "$srcroot" "$0" -newer "$stamp" -type f -print -quit)" ]; then
   exit 0
 fi
-# The wheels' exported CMake targets name include folders of the machine that built them; point
-# them at this venv's Python and numpy headers.
-mkdir -p "$(dirname "$build")"
+for tool in cmake make cc c++; do
+  command -v "$tool" >/dev/null || { echo "build_interfaces: $tool is required (apt-get install cmake build-essential)" >&2; exit 1; }
+done
+"$py" -c 'import rosidl_adapter, catkin_pkg' 2>/dev/null || {
+  echo "build_interfaces: the rosidl generators are missing: pip install -e '.[rosgen]'" >&2; exit 1; }
+
+# Snag 1: the wheels' exported CMake targets name include folders of the machine that built them
+# (/opt/python/cp311-cp311/...). Rewrite them, inside the venv only, to this venv's headers.
 pyinc="$("$py" -c 'import sysconfig; print(sysconfig.get_paths()["include"])')"
 npinc="$("$py" -c 'import numpy; print(numpy.get_include())')"
-grep -rl --include='*.cmake' -e '/opt/python/cp311-cp311' "$venv/share" "$venv/lib" 2>/dev/null | while read -r f; do
+{ grep -rl --include='*.cmake' -e '/opt/python/cp311-cp311' "$venv/share" "$venv/lib" 2>/dev/null || true; } | while read -r f; do
   sed -i -e "s#/opt/python/cp311-cp311/include/python3.11#$pyinc#g" \
          -e "s#/opt/python/cp311-cp311/lib/python3.11/site-packages/numpy/_core/include#$npinc#g" \
          -e "s#/opt/python/cp311-cp311/lib/python3.11/site-packages/numpy/core/include#$npinc#g" "$f"
 done
-export CMAKE_PREFIX_PATH="$venv" AMENT_PREFIX_PATH="$venv" PATH="$venv/bin:$PATH"
-ld="$("$py" -c 'import os; print(os.environ.get("LD_LIBRARY_PATH", ""))')"
-export LD_LIBRARY_PATH="$ld"
-cmake -S "$src" -B "$build" -DCMAKE_INSTALL_PREFIX="$venv" -DBUILD_TESTING=OFF \
-  -DPython3_EXECUTABLE="$py" -DPYTHON_EXECUTABLE="$py" -DCMAKE_BUILD_TYPE=Release > "$build.log" 2>&1 \
-  || { cat "$build.log"; exit 1; }
-cmake --build "$build" -j2 >> "$build.log" 2>&1 || { tail -50 "$build.log"; exit 1; }
-cmake --install "$build" >> "$build.log" 2>&1 || { tail -20 "$build.log"; exit 1; }
-# make the generated Python package importable from the venv
-site="$("$py" -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])')"
-gen="$(find "$venv/lib" -path '*site-packages/tf2_msgs' -type d | head -1)"
-if [ -n "$gen" ] && [ "$(dirname "$gen")" != "$site" ]; then
-  echo "$(dirname "$gen")" > "$site/mrslam_interfaces.pth"
-fi
+# the venv's python headers must exist (a venv made from a python without -dev headers has none)
+[ -f "$pyinc/Python.h" ] || { echo "build_interfaces: $pyinc/Python.h missing (install python3.11-dev)" >&2; exit 1; }
+
+export CMAKE_PREFIX_PATH="$prefix:$venv" AMENT_PREFIX_PATH="$prefix:$venv" PATH="$venv/bin:$PATH"
+# the wheels' libraries, as the bootstrapper (ros_wheels_bootstrapper.pth) sets them for python
+LD_LIBRARY_PATH="$("$py" -c 'import os; print(os.environ.get("LD_LIBRARY_PATH", ""))')"
+export LD_LIBRARY_PATH="$prefix/lib:$LD_LIBRARY_PATH"
+mkdir -p "$here/build/interfaces" "$prefix"
+for pkg in "${packages[@]}"; do
+  # Snag 2 (package.xml needs a valid maintainer e-mail) is handled in the package.xml itself.
+  build="$here/build/interfaces/$pkg"
+  log="$here/build/interfaces/$pkg.log"
+  echo "build_interfaces: generating $pkg into $prefix (log: $log)"
+  cmake -S "$srcroot/$pkg" -B "$build" -DCMAKE_INSTALL_PREFIX="$prefix" -DBUILD_TESTING=OFF \
+    -DCMAKE_BUILD_TYPE=Release -DPython3_EXECUTABLE="$py" -DPYTHON_EXECUTABLE="$py" \
+    -DCMAKE_INSTALL_RPATH="$prefix/lib" -DCMAKE_BUILD_WITH_INSTALL_RPATH=OFF > "$log" 2>&1 \
+    || { tail -40 "$log" >&2; exit 1; }
+  cmake --build "$build" -j2 >> "$log" 2>&1 || { tail -40 "$log" >&2; exit 1; }
+  cmake --install "$build" >> "$log" 2>&1 || { tail -20 "$log" >&2; exit 1; }
+done
+
+# Earlier versions of this script installed into the venv prefix itself; such a copy would shadow
+# this one (it comes first on sys.path and LD_LIBRARY_PATH). Remove it, but only when its
+# package.xml is ours (no PyPI wheel provides these packages).
+for pkg in "${packages[@]}"; do
+  if grep -qs "generated by mrslam" "$venv/share/$pkg/package.xml"; then
+    echo "build_interfaces: removing the old $pkg install from $venv"
+    rm -rf "$venv/share/$pkg" "$venv/include/$pkg" "$site/$pkg" "$site/$pkg"-*.egg-info "$venv/.$pkg.stamp"
+    rm -f "$venv"/lib/lib"$pkg"__*.so "$venv"/share/ament_index/resource_index/*/"$pkg"
+  fi
+done
+
+# Make the install visible to every interpreter of the venv. .pth files run in name order, so this
+# one runs before ros_wheels_bootstrapper.pth: it puts the generated Python packages on sys.path
+# and the generated libraries on LD_LIBRARY_PATH before the bootstrapper re-executes python with
+# that LD_LIBRARY_PATH (the libraries also carry an RPATH to $prefix/lib).
+pysite="$prefix/lib/python3.11/site-packages"
+[ -d "$pysite/tf2_msgs" ] || { echo "build_interfaces: $pysite/tf2_msgs was not generated" >&2; exit 1; }
+cat > "$site/mrslam_interfaces.pth" <<EOF
+$pysite
+import os; _l = os.environ.get('LD_LIBRARY_PATH', ''); os.environ['LD_LIBRARY_PATH'] = _l if '$prefix/lib' in _l.split(':') else ':'.join(p for p in ('$prefix/lib', _l) if p); _a = os.environ.get('AMENT_PREFIX_PATH', ''); os.environ['AMENT_PREFIX_PATH'] = _a if '$prefix' in _a.split(':') else ':'.join(p for p in ('$prefix', '$venv', _a) if p)
+EOF
 touch "$stamp"
-echo "tf2_msgs built into $venv"
+echo "build_interfaces: ${packages[*]} installed in $prefix"

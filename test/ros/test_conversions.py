@@ -135,3 +135,162 @@ def test_obstacle_scan_round_trip_keeps_free_space():
     np.testing.assert_allclose(scan.bearings, [-0.05, 0.05])
     np.testing.assert_allclose(scan.ranges, [1.0, 2.5])
     assert scan.hit.tolist() == [True, False]
+
+
+# ----------------------------------------------------------------------------- added conversions
+def test_cloud_layouts_rows_and_bad_values():
+    from mrslam_ros.conversions import observations_to_cloud
+
+    obs = _obs(b=4, d=3)
+    msg = observations_to_cloud(obs, "f")
+    # the same points as 2 rows of 2, each row padded by 8 bytes
+    step = msg.point_step
+    rows = np.frombuffer(bytes(msg.data), np.uint8).reshape(2, 2 * step)
+    msg.height, msg.width, msg.row_step = 2, 2, 2 * step + 8
+    msg.data = np.hstack([rows, np.full((2, 8), 255, np.uint8)]).tobytes()
+    back = cloud_to_observations(msg, "r")
+    np.testing.assert_allclose(back.z, obs.z, rtol=1e-6)
+    np.testing.assert_array_equal(back.track_ids, obs.track_ids)
+    msg.row_step = step  # shorter than a row
+    with pytest.raises(ConversionError, match="row_step"):
+        cloud_to_observations(msg, "r")
+    zero = observations_to_cloud(obs, "f")
+    zero.point_step = 0
+    with pytest.raises(ConversionError, match="point_step"):
+        cloud_to_observations(zero, "r")
+    wide = observations_to_cloud(obs, "f")
+    wide.fields[-1].count = 50  # descriptor runs past the point
+    with pytest.raises(ConversionError, match="does not fit"):
+        cloud_to_observations(wide, "r")
+    nan = observations_to_cloud(ObservationSet("r", 0, np.full((1, 3), np.nan), np.eye(3)[None]), "f")
+    with pytest.raises(ConversionError, match="non-finite"):
+        cloud_to_observations(nan, "r")
+    empty = cloud_to_observations(observations_to_cloud(ObservationSet("r", 9, np.zeros((0, 3)), np.zeros((0, 3, 3))), "f"), "r")
+    assert len(empty) == 0 and empty.stamp_ns == 9
+
+
+def test_uint32_track_ids_and_float64_points_are_read():
+    from sensor_msgs.msg import PointCloud2, PointField
+
+    names = ["x", "y", "z", "cxx", "cxy", "cxz", "cyy", "cyz", "czz"]
+    fields = [PointField(name=n, offset=8 * i, datatype=PointField.FLOAT64, count=1) for i, n in enumerate(names)]
+    fields.append(PointField(name="track_id", offset=72, datatype=PointField.UINT32, count=1))
+    rec = np.zeros(1, dtype=[(n, "<f8") for n in names] + [("track_id", "<u4")])
+    rec["x"], rec["cxx"], rec["cyy"], rec["czz"], rec["track_id"] = 2.5, 1.0, 2.0, 3.0, 4_000_000_000
+    msg = PointCloud2(height=1, width=1, fields=fields, point_step=76, row_step=76, data=rec.tobytes())
+    obs = cloud_to_observations(msg, "r")
+    assert obs.z[0, 0] == 2.5 and obs.track_ids[0] == 4_000_000_000 and obs.descriptors.shape == (1, 0)
+    np.testing.assert_allclose(np.diag(obs.cov[0]), [1.0, 2.0, 3.0])
+
+
+def test_odometry_pose_path_pose_array_round_trips():
+    from mrslam_ros.conversions import (
+        path_to_poses,
+        pose_array_msg,
+        pose_array_to_poses,
+        pose_to_odometry,
+        pose_with_covariance_to_pose,
+    )
+
+    pose, cov = np.array([1.0, 2.0, -3.0]), np.array([[0.1, 0.01, 0.0], [0.01, 0.2, 0.0], [0.0, 0.0, 0.05]])
+    odo = pose_to_odometry(pose, cov, 42, "robot1/odom", "robot1/base_link", twist=(0.3, -0.1))
+    assert odo.child_frame_id == "robot1/base_link" and odo.twist.twist.angular.z == -0.1
+    stamp, p, c = odometry_to_pose(odo)
+    assert stamp == 42 and np.allclose(p, pose) and np.allclose(c, cov)
+    stamp, p, c = pose_with_covariance_to_pose(pose_with_covariance(pose, cov, 7, "map"))
+    assert stamp == 7 and np.allclose(p, pose) and np.allclose(c, cov)
+    poses = np.array([[0.0, 0.0, 0.0], [1.0, 0.5, 3.1], [2.0, -1.0, -1.2]])
+    back, stamps = path_to_poses(path_msg(poses, np.array([10, 20, 30]), "map"))
+    np.testing.assert_allclose(back, poses, atol=1e-12)
+    assert stamps.tolist() == [10, 20, 30]
+    pa = pose_array_msg(poses, 5, "map")
+    assert len(pa.poses) == 3 and pa.header.frame_id == "map"
+    np.testing.assert_allclose(pose_array_to_poses(pa), poses, atol=1e-12)
+    with pytest.raises(ConversionError, match="\\(M, 3\\)"):
+        pose_array_msg(np.zeros((3, 2)), 0, "map")
+    odo.pose.covariance[0] = float("nan")
+    with pytest.raises(ConversionError, match="not finite"):
+        pose_with_covariance_to_pose(odo)  # an Odometry's pose field has the same layout
+
+
+def test_tf_clock_and_transforms():
+    from mrslam_ros.conversions import clock_msg, tf_message, transform_to_pose
+
+    tf = transform_msg(np.array([1.0, -2.0, 0.7]), 3_000_000_005, "map", "robot2/odom")
+    stamp, parent, child, pose = transform_to_pose(tf)
+    assert (stamp, parent, child) == (3_000_000_005, "map", "robot2/odom") and np.allclose(pose, [1.0, -2.0, 0.7])
+    msg = tf_message([tf, tf])
+    assert type(msg).__name__ == "TFMessage" and len(msg.transforms) == 2
+    c = clock_msg(12_000_000_003)
+    assert c.clock.sec == 12 and c.clock.nanosec == 3
+
+
+def test_occupancy_from_log_odds_and_back():
+    from mrslam_ros.conversions import log_odds_to_occupancy, occupancy_to_arrays
+
+    lo = np.array([[0.0, 2.0, -2.0], [0.0, 0.0, np.log(9.0)]])
+    msg = log_odds_to_occupancy(lo, np.array([-1.0, 2.0]), 0.05, 11)
+    assert list(msg.data) == [-1, 88, 12, -1, -1, 90]
+    assert msg.info.width == 3 and msg.info.height == 2 and msg.info.resolution == pytest.approx(0.05)
+    prob, known, origin, res = occupancy_to_arrays(msg)
+    assert known.tolist() == [[False, True, True], [False, False, True]]
+    np.testing.assert_allclose(prob, [[0.5, 0.88, 0.12], [0.5, 0.5, 0.9]])
+    np.testing.assert_allclose(origin, [-1.0, 2.0, 0.0])
+    assert res == pytest.approx(0.05)
+    msg.data = list(msg.data)[:-1]
+    with pytest.raises(ConversionError, match="5 cells"):
+        occupancy_to_arrays(msg)
+
+
+def test_landmark_ellipsoids():
+    from visualization_msgs.msg import Marker
+
+    from mrslam_ros.conversions import landmark_markers
+
+    mean = np.array([[1.0, 2.0, 0.5], [0.0, 0.0, 0.0]])
+    # second landmark: sigma 0.3 m along (1, 1, 0)/√2, 0.1 m along (1, −1, 0)/√2 and 0.2 m along z
+    u, v = np.array([1.0, 1.0, 0.0]) / np.sqrt(2), np.array([1.0, -1.0, 0.0]) / np.sqrt(2)
+    cov2 = 0.09 * np.outer(u, u) + 0.01 * np.outer(v, v) + 0.04 * np.outer([0, 0, 1.0], [0, 0, 1.0])
+    msg = landmark_markers(mean, np.stack([np.diag([0.01, 0.04, 0.0]), cov2]), 3, "map", n_sigma=2.0)
+    assert msg.markers[0].action == Marker.DELETEALL and len(msg.markers) == 3
+    m0, m1 = msg.markers[1], msg.markers[2]
+    assert m0.type == Marker.SPHERE and m0.id == 0 and m0.pose.position.y == 2.0
+    assert sorted([m0.scale.x, m0.scale.y, m0.scale.z]) == pytest.approx([0.01, 0.4, 0.8])  # min size for σ = 0
+    assert [m1.scale.x, m1.scale.y, m1.scale.z] == pytest.approx([0.4, 0.8, 1.2])  # ascending eigenvalues
+    # the marker's x axis (smallest) must be ±v, its z axis (largest) ±u
+    from scipy.spatial.transform import Rotation
+
+    q = m1.pose.orientation
+    rot = Rotation.from_quat([q.x, q.y, q.z, q.w]).as_matrix()
+    assert abs(rot[:, 0] @ v) == pytest.approx(1.0) and abs(rot[:, 2] @ u) == pytest.approx(1.0)
+    with pytest.raises(ConversionError, match="cov must be"):
+        landmark_markers(mean, np.zeros((3, 3, 3)), 0)
+
+
+def test_diagnostics_message_and_counters():
+    from diagnostic_msgs.msg import DiagnosticStatus
+
+    from mrslam_ros.conversions import diagnostics_msg, diagnostics_to_counters
+    from mrslam_ros.diagnostics import Counters
+
+    now = [0.0]
+    logged = []
+    c = Counters(log=logged.append, log_period=5.0, clock=lambda: now[0])
+    c.count("unknown_robot", "robot9")
+    c.count("unknown_robot")
+    now[0] = 6.0
+    c.count("unknown_robot")
+    c.count("wrong_frame", n=2)
+    c.set("update_ms_p95", 12.5)
+    assert len(logged) == 3 and "robot9" in logged[0] and "3 so far" in logged[1]
+    counters, level, message = c.snapshot()
+    assert level == "warn" and message == "dropping: unknown_robot, wrong_frame"
+    assert counters == {"drops.unknown_robot": 3, "drops.wrong_frame": 2, "drops.total": 5, "update_ms_p95": 12.5}
+    assert c.snapshot()[1] == "ok"  # nothing new since
+    msg = diagnostics_msg("/slam", counters, 1_000_000_000, level, message)
+    st = msg.status[0]
+    assert st.level == DiagnosticStatus.WARN and st.name == "/slam" and msg.header.stamp.sec == 1
+    assert [(kv.key, kv.value) for kv in st.values][:2] == [("drops.total", "5"), ("drops.unknown_robot", "3")]
+    assert diagnostics_to_counters(msg)["/slam"]["update_ms_p95"] == 12.5
+    with pytest.raises(ConversionError, match="level"):
+        diagnostics_msg("x", {}, 0, level="fatal")

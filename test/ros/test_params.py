@@ -30,3 +30,46 @@ def test_declare_override_and_read_back():
         node.destroy_node()
     finally:
         rclpy.shutdown()
+
+
+def test_params_file_with_nested_keys_ints_for_floats_and_typos(tmp_path):
+    """`--ros-args --params-file` as the launcher writes it: nested YAML, YAML ints for float fields."""
+    import rclpy
+    import yaml
+
+    from mrslam_core.configio import ConfigError
+    from mrslam_core.pipelines.mrclam import MrclamConfig
+    from mrslam_ros.params import declare_config, read_config, unknown_overrides
+
+    default = MrclamConfig()
+    params = {"filter": {"num_particles": 77, "motion": {"alpha1": 1}}, "robots": [2, 4, 5], "use_sim_time": True}
+    path = tmp_path / "p.yaml"
+    path.write_text(yaml.safe_dump({"/**": {"ros__parameters": params}}))
+    typo = tmp_path / "typo.yaml"
+    typo.write_text(yaml.safe_dump({"/**": {"ros__parameters": {"filter": {"num_particle": 5}}}}))
+    rclpy.init()
+    try:
+        node = rclpy.create_node("params_file_test", cli_args=["--ros-args", "--params-file", str(path)])
+        declare_config(node, default)
+        cfg = read_config(node, MrclamConfig, strict=True)
+        assert cfg.filter.num_particles == 77 and cfg.robots == (2, 4, 5)
+        assert cfg.filter.motion.alpha1 == 1.0 and isinstance(cfg.filter.motion.alpha1, float)
+        assert cfg.filter.motion.alpha2 == default.filter.motion.alpha2  # untouched: the dataclass default
+        assert node.get_parameter("use_sim_time").value is True
+        node.destroy_node()
+        node = rclpy.create_node("params_typo_test", cli_args=["--ros-args", "--params-file", str(typo)])
+        declare_config(node, default)
+        assert unknown_overrides(node) == ["filter.num_particle"]
+        with pytest.raises(ConfigError, match="did you mean filter.num_particles"):
+            read_config(node, MrclamConfig, strict=True)
+        assert read_config(node, MrclamConfig).filter.num_particles == default.filter.num_particles  # warned only
+        node.destroy_node()
+        bad = tmp_path / "bad.yaml"
+        bad.write_text(yaml.safe_dump({"/**": {"ros__parameters": {"filter": {"motion": {"alpha1": "high"}}}}}))
+        node = rclpy.create_node("params_bad_test", cli_args=["--ros-args", "--params-file", str(bad)])
+        declare_config(node, default)
+        with pytest.raises(ConfigError, match="filter.motion.alpha1: expected a number"):
+            read_config(node, MrclamConfig)
+        node.destroy_node()
+    finally:
+        rclpy.shutdown()

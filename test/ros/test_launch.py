@@ -1,0 +1,151 @@
+"""``mrslam launch``: processes with names, namespaces and params; a failing node or Ctrl-C stops all.
+
+The nodes are :mod:`launch_dummy` (beside this file), started through PYTHONPATH.
+"""
+
+from __future__ import annotations
+
+import io
+import os
+import re
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+import yaml
+
+from mrslam_core.configio import ConfigError, from_dict
+from mrslam_ros.launch import LaunchConfig, Launcher, NodeSpec
+
+pytestmark = pytest.mark.ros
+HERE = Path(__file__).resolve().parent
+
+
+@pytest.fixture(autouse=True)
+def dummy_on_path(monkeypatch):
+    monkeypatch.setenv("PYTHONPATH", os.pathsep.join(p for p in (str(HERE), os.environ.get("PYTHONPATH", "")) if p))
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    return True
+
+
+def _pids(text: str) -> dict[str, int]:
+    return {m.group(1): int(m.group(2)) for m in re.finditer(r"^\[(\S+)\] up pid=(\d+)", text, re.MULTILINE)}
+
+
+def test_config_schema_and_command(tmp_path):
+    (tmp_path / "extra.yaml").write_text("{}")
+    cfg = from_dict(LaunchConfig, {"use_sim_time": True, "nodes": [
+        {"module": "m.a", "name": "a", "namespace": "/robot1/", "params": {"x": {"y": 2}, "z": None},
+         "params_files": ["extra.yaml"], "remap": {"obs": "observations"}}]})
+    launcher = Launcher(cfg, base_dir=tmp_path)
+    cmd = launcher.command(cfg.nodes[0])
+    assert cmd[1:5] == ["-m", "m.a", "--ros-args", "-r"]
+    assert "__node:=a" in cmd and "__ns:=/robot1" in cmd and "obs:=observations" in cmd
+    files = [cmd[i + 1] for i, c in enumerate(cmd) if c == "--params-file"]
+    assert files[0] == str(tmp_path / "extra.yaml")
+    params = yaml.safe_load(Path(files[1]).read_text())
+    assert params == {"/**": {"ros__parameters": {"x": {"y": 2}, "use_sim_time": True}}}  # None dropped
+    launcher.stop()
+    with pytest.raises(ConfigError, match="unknown key nodes\\[0\\].modul"):
+        from_dict(LaunchConfig, {"nodes": [{"modul": "m", "name": "a"}]})
+    with pytest.raises(ConfigError, match="unique"):
+        from_dict(LaunchConfig, {"nodes": [{"module": "m", "name": "a"}, {"module": "m", "name": "a"}]})
+    with pytest.raises(ConfigError, match="not found"):
+        Launcher(LaunchConfig([NodeSpec("m", "a", params_files=["nope.yaml"])]), base_dir=tmp_path).start()
+
+
+def test_failing_node_stops_the_others(tmp_path):
+    cfg = LaunchConfig(nodes=[
+        NodeSpec("launch_dummy", "talker", "robot1", {"exit_after": 2.0, "exit_code": 3, "greeting": "hi there"}),
+        NodeSpec("launch_dummy", "listener", "robot2"),
+        NodeSpec("launch_dummy", "stubborn", params={"stubborn": True}, use_sim_time=False),
+    ], use_sim_time=True, log_dir=str(tmp_path / "logs"), stop_timeout=1.5)
+    log = io.StringIO()
+    launcher = Launcher(cfg, log=log)
+    launcher.start()
+    t0 = time.monotonic()
+    failed = launcher.wait(timeout=30)
+    assert failed == ["robot1/talker"]
+    assert launcher.exited()["robot1/talker"] == 3
+    codes = launcher.stop()
+    elapsed = time.monotonic() - t0
+    text = log.getvalue()
+    assert codes["robot2/listener"] in (0, -signal.SIGINT, 130)  # stopped by the first signal
+    assert codes["stubborn"] == -signal.SIGKILL  # ignored SIGINT and SIGTERM: 2 × 1.5 s, then killed
+    assert elapsed < 30
+    pids = _pids(text)
+    assert set(pids) == {"robot1/talker", "robot2/listener", "stubborn"}
+    assert not any(_alive(p) for p in pids.values())
+    # names, namespaces and params arrive; lines are prefixed and also kept per node
+    assert "[robot1/talker] up" in text and "fqn=/robot1/talker sim=True greeting=hi there" in text
+    assert "fqn=/robot2/listener sim=True" in text and "fqn=/stubborn sim=False" in text
+    assert "[robot1/talker] exiting with 3" in text
+    assert "exiting with 3" in (tmp_path / "logs" / "robot1_talker.log").read_text()
+    assert "interrupted" in (tmp_path / "logs" / "robot2_listener.log").read_text()
+
+
+def test_cli_ctrl_c_stops_every_node(tmp_path):
+    cfg = tmp_path / "launch.yaml"
+    cfg.write_text(yaml.safe_dump({"stop_timeout": 2.0, "nodes": [
+        {"module": "launch_dummy", "name": "a", "namespace": "robot1"},
+        {"module": "launch_dummy", "name": "b", "namespace": "robot2"}]}))
+    proc = subprocess.Popen([sys.executable, "-m", "mrslam_ros.cli", "launch", str(cfg)],
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    lines: list[str] = []
+    end = time.monotonic() + 30
+    while time.monotonic() < end and len(_pids("".join(lines))) < 2:
+        line = proc.stdout.readline()  # type: ignore[union-attr]
+        if not line:
+            break
+        lines.append(line)
+    pids = _pids("".join(lines))
+    assert set(pids) == {"robot1/a", "robot2/b"}, "".join(lines)
+    time.sleep(0.5)  # let both finish writing their first line (a signal inside print() is a traceback)
+    t0 = time.monotonic()
+    proc.send_signal(signal.SIGINT)
+    out, _ = proc.communicate(timeout=20)
+    assert proc.returncode == 0, out
+    assert time.monotonic() - t0 < 2.0  # the first signal (SIGINT) was enough: no 2 s SIGTERM wait
+    assert not any(_alive(p) for p in pids.values())
+    assert "[robot1/a] interrupted" in out and "[robot2/b] interrupted" in out, out
+
+
+def test_cli_bad_config(tmp_path, capsys):
+    from mrslam_ros.launch import main
+
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("nodes: [{module: x}]\n")
+    assert main([str(bad)]) == 2
+    assert "missing required key nodes[0].name" in capsys.readouterr().err
+
+
+def test_example_config_matches_the_node_configs(capsys):
+    """config/launch_*.yaml: every node module exists and its params fit its *NodeConfig dataclass."""
+    import dataclasses
+    import importlib
+
+    from mrslam_core.configio import load_yaml
+    from mrslam_ros.launch import main
+
+    examples = sorted((HERE.parents[1] / "config").glob("launch_*.yaml"))
+    assert examples
+    for path in examples:
+        cfg = load_yaml(LaunchConfig, path)
+        assert cfg.nodes
+        for spec in cfg.nodes:
+            module = importlib.import_module(spec.module)
+            classes = [c for n, c in vars(module).items() if n.endswith("NodeConfig") and dataclasses.is_dataclass(c)]
+            assert len(classes) == 1, spec.module
+            from_dict(classes[0], spec.params)  # raises ConfigError naming a wrong key
+        assert main([str(path), "--dry-run"]) == 0
+        out = capsys.readouterr().out.splitlines()
+        assert len(out) == len(cfg.nodes) and all(" -m mrslam_ros." in line for line in out)
