@@ -14,10 +14,8 @@ from collections import Counter
 from dataclasses import dataclass, field
 
 import numpy as np
-import rclpy
 from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped, Twist
 from nav_msgs.msg import OccupancyGrid
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from sensor_msgs.msg import LaserScan
 
@@ -26,6 +24,7 @@ from mrslam_core.exploration.explorer import Explorer
 from mrslam_core.exploration.grid import OccupancyGrid as Grid
 from mrslam_ros.conversions import laser_to_scan, msg_to_pose, occupancy_msg, pose_to_msg, stamp_to_ns
 from mrslam_ros.params import declare_config, read_config
+from mrslam_ros.spin import run_node
 
 
 @dataclass(frozen=True)
@@ -103,16 +102,7 @@ class ExploreNode(Node):
 
 
 def main(argv: list[str] | None = None) -> int:
-    rclpy.init(args=argv if argv is not None else sys.argv)
-    node = ExploreNode()
-    try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    return run_node(ExploreNode, argv)
 
 
 if __name__ == "__main__":

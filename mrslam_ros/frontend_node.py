@@ -15,8 +15,6 @@ from collections import Counter, deque
 from dataclasses import dataclass, field
 
 import numpy as np
-import rclpy
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo, Image, LaserScan, PointCloud2
 
@@ -32,6 +30,7 @@ from mrslam_ros.conversions import (
     stamp_to_ns,
 )
 from mrslam_ros.params import declare_config, read_config
+from mrslam_ros.spin import run_node
 
 _SIM_EXTRINSIC = (0.0, 0.0, 1.0, 0.12, -1.0, 0.0, 0.0, 0.06, 0.0, -1.0, 0.0, 0.45, 0.0, 0.0, 0.0, 1.0)
 
@@ -123,16 +122,7 @@ class FrontendNode(Node):
 
 
 def main(argv: list[str] | None = None) -> int:
-    rclpy.init(args=argv if argv is not None else sys.argv)
-    node = FrontendNode()
-    try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    return run_node(FrontendNode, argv)
 
 
 if __name__ == "__main__":

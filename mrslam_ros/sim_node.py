@@ -11,10 +11,8 @@ from __future__ import annotations
 import sys
 from dataclasses import dataclass, field
 
-import rclpy
 from geometry_msgs.msg import Twist
 from nav_msgs.msg import Odometry
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import CameraInfo, Image
@@ -24,6 +22,7 @@ from mrslam_core.sim.config import SimConfig
 from mrslam_core.sim.simulation import Simulation
 from mrslam_ros.conversions import array_to_image, calibration_to_camera_info, ns_to_stamp, pose_to_msg, transform_msg
 from mrslam_ros.params import declare_config, read_config
+from mrslam_ros.spin import run_node
 
 
 @dataclass(frozen=True)
@@ -115,16 +114,7 @@ class SimNode(Node):
 
 
 def main(argv: list[str] | None = None) -> int:
-    rclpy.init(args=argv if argv is not None else sys.argv)
-    node = SimNode()
-    try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    return run_node(SimNode, argv)
 
 
 if __name__ == "__main__":

@@ -17,10 +17,8 @@ from collections import Counter, deque
 from dataclasses import dataclass, field
 
 import numpy as np
-import rclpy
 from geometry_msgs.msg import PoseWithCovarianceStamped
 from nav_msgs.msg import Odometry, Path
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from sensor_msgs.msg import PointCloud2
 from tf2_msgs.msg import TFMessage
@@ -38,6 +36,7 @@ from mrslam_ros.conversions import (
     transform_msg,
 )
 from mrslam_ros.params import declare_config, read_config
+from mrslam_ros.spin import run_node
 
 
 @dataclass(frozen=True)
@@ -138,16 +137,7 @@ class SlamNode(Node):
 
 
 def main(argv: list[str] | None = None) -> int:
-    rclpy.init(args=argv if argv is not None else sys.argv)
-    node = SlamNode()
-    try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    return run_node(SlamNode, argv)
 
 
 if __name__ == "__main__":
