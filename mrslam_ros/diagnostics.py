@@ -38,6 +38,14 @@ class Counters:
             self._last_log[reason] = now
             self._log(f"dropped ({reason}, {self.drops[reason]} so far){': ' + detail if detail else ''}")
 
+    def mirror(self, counts: Mapping[str, int], prefix: str = "", detail: str = "") -> None:
+        """Count what a component's own drop counter (``counts``, reason -> total) gained since the
+        last call, as ``prefix + reason``."""
+        for reason, total in counts.items():
+            grown = int(total) - self.drops.get(prefix + reason, 0)
+            if grown > 0:
+                self.count(prefix + reason, detail, grown)
+
     def set(self, key: str, value: float) -> None:
         """Set a plain value reported with the drops (e.g. ``update_ms_p95``)."""
         self.values[key] = float(value)

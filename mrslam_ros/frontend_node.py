@@ -1,17 +1,19 @@
 """The per-robot stereo frontend node (run it in the robot's namespace).
 
 Subscribes ``stereo/{left,right}/image_raw`` and ``stereo/{left,right}/camera_info``, pairs left and
-right images whose stamps differ by at most ``max_skew_ns`` (message_filters is not on PyPI:
-the pairing is this node's), runs :class:`mrslam_core.frontend.frontend.Frontend`, and publishes
+right images whose stamps differ by at most ``max_skew_ns`` (approximate-time sync of
+:mod:`mrslam_ros.sync`, since message_filters is not on PyPI) with the latest camera_info of each
+side, runs :class:`mrslam_core.frontend.frontend.Frontend`, and publishes
 ``observations`` (PointCloud2 in ``<robot>/base_link``) and ``scan`` (the pseudo laser scan for the
-occupancy grid, LaserScan in ``<robot>/base_link``). Drops are counted, never raised:
-missing camera_info, unpaired images, and whatever the frontend itself rejects.
+occupancy grid, LaserScan in ``<robot>/base_link``). A frame without usable points still gives an
+(empty) observation set, so the central node knows the robot is alive. Drops are counted and
+published on ``/diagnostics``, never raised: missing or bad camera_info, unpaired, late or
+duplicated images, wrong encodings or sizes, and whatever the frontend itself rejects.
 """
 
 from __future__ import annotations
 
 import sys
-from collections import Counter, deque
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -29,8 +31,10 @@ from mrslam_ros.conversions import (
     observations_to_cloud,
     stamp_to_ns,
 )
+from mrslam_ros.diagnostics import Diagnostics
 from mrslam_ros.params import declare_config, read_config
 from mrslam_ros.spin import run_node
+from mrslam_ros.sync import ApproximateTimeSync
 
 _SIM_EXTRINSIC = (0.0, 0.0, 1.0, 0.12, -1.0, 0.0, 0.0, 0.06, 0.0, -1.0, 0.0, 0.45, 0.0, 0.0, 0.0, 1.0)
 
@@ -62,20 +66,25 @@ class FrontendNode(Node):
         super().__init__(name, **kwargs)
         declare_config(self, FrontendNodeConfig())
         self.cfg = read_config(self, FrontendNodeConfig)
-        self.drops: Counter[str] = Counter()
+        self.diag = Diagnostics(self)
         self.infos: dict[str, CameraInfo] = {}
-        self.images: dict[str, deque] = {"left": deque(maxlen=self.cfg.queue), "right": deque(maxlen=self.cfg.queue)}
+        self.sync = ApproximateTimeSync(2, self.cfg.max_skew_ns, self.cfg.queue)
         self.frontend = None
         self._rig_key = None
         self.pub = self.create_publisher(PointCloud2, "observations", 10)
         self.scan_pub = self.create_publisher(LaserScan, "scan", 10)
-        for side in ("left", "right"):
+        for i, side in enumerate(("left", "right")):
             self.create_subscription(CameraInfo, f"stereo/{side}/camera_info", lambda m, s=side: self.infos.__setitem__(s, m), 10)
-            self.create_subscription(Image, f"stereo/{side}/image_raw", lambda m, s=side: self.on_image(s, m), 10)
+            self.create_subscription(Image, f"stereo/{side}/image_raw", lambda m, i=i: self.on_image(i, m), 10)
+
+    @property
+    def drops(self):
+        """Drops by reason (this node's and the synchroniser's)."""
+        return self.diag.drops
 
     def _ensure_frontend(self) -> bool:
         if "left" not in self.infos or "right" not in self.infos:
-            self.drops["no_camera_info"] += 1
+            self.diag.count("no_camera_info", "no camera_info received yet for both cameras")
             return False
         key = (tuple(self.infos["left"].p), tuple(self.infos["right"].p), tuple(self.infos["left"].d))
         if key != self._rig_key:
@@ -83,8 +92,7 @@ class FrontendNode(Node):
                 rig = StereoRig(camera_info_to_calibration(self.infos["left"]), camera_info_to_calibration(self.infos["right"]),
                                 np.asarray(self.cfg.t_base_cam, float).reshape(4, 4))
             except (ConversionError, FrontendError, ValueError) as exc:
-                self.drops["bad_camera_info"] += 1
-                self.get_logger().warn(f"camera_info rejected: {exc}", throttle_duration_sec=5.0)
+                self.diag.count("bad_camera_info", str(exc))
                 return False
             from mrslam_core.frontend.frontend import Frontend
 
@@ -92,30 +100,25 @@ class FrontendNode(Node):
             self._rig_key = key
         return True
 
-    def on_image(self, side: str, msg: Image) -> None:
-        self.images[side].append(msg)
-        other = "right" if side == "left" else "left"
-        stamp = stamp_to_ns(msg.header.stamp)
-        for partner in list(self.images[other]):
-            if abs(stamp_to_ns(partner.header.stamp) - stamp) <= self.cfg.max_skew_ns:
-                left, right = (msg, partner) if side == "left" else (partner, msg)
-                self.images["left"].clear()
-                self.images["right"].clear()
-                self.process(left, right)
-                return
+    def on_image(self, side: int, msg: Image) -> None:
+        pair = self.sync.add(side, stamp_to_ns(msg.header.stamp), msg)
+        self.diag.mirror(self.sync.drops, "images_", "left/right images not paired")
+        if pair is not None:
+            self.process(*pair)
 
     def process(self, left: Image, right: Image) -> None:
         if not self._ensure_frontend():
             return
         try:
             l_img, r_img = image_to_array(left), image_to_array(right)
-        except ConversionError:
-            self.drops["bad_image"] += 1
+        except ConversionError as exc:
+            self.diag.count("bad_image", str(exc))
             return
         obs, scan = self.frontend.step(l_img, r_img, stamp_to_ns(left.header.stamp),
-                                    right_stamp_ns=stamp_to_ns(right.header.stamp), encoding=left.encoding,
-                                    right_encoding=right.encoding)
-        if obs is not None and len(obs):
+                                       right_stamp_ns=stamp_to_ns(right.header.stamp), encoding=left.encoding,
+                                       right_encoding=right.encoding)
+        self.diag.mirror(self.frontend.drops, "frontend_", "rejected by the frontend")
+        if obs is not None:
             self.pub.publish(observations_to_cloud(obs, f"{self.cfg.robot}/base_link"))
         if scan is not None:
             self.scan_pub.publish(obstacle_scan_to_laser(scan, f"{self.cfg.robot}/base_link"))

@@ -1,139 +1,192 @@
 """The central SLAM node: every robot's observations and odometry into ONE multi-robot filter.
 
 Subscribes, per robot listed in the config: ``/<robot>/odom`` (nav_msgs/Odometry, odom -> base_link)
-and ``/<robot>/observations`` (PointCloud2 from the frontend, base_link). Each observation set is
-paired with the robot's odometry at its stamp (interpolated from the odometry it has received) and
-fed to the filter as that robot's update. Publishes ``/<robot>/pose`` (PoseWithCovarianceStamped in
-the map frame), ``/<robot>/path`` and map -> ``<robot>/odom`` on /tf.
+and ``/<robot>/observations`` (PointCloud2 from the frontend, base_link). The ordering, pairing with
+odometry and the filter live in :class:`mrslam_core.pipelines.central.CentralMapper`; this node
+converts and publishes: ``/<robot>/pose`` (PoseWithCovarianceStamped, map), ``/<robot>/path``,
+map -> ``<robot>/odom`` on /tf after every update of that robot, and on a timer the best
+particle's landmarks (``/slam/landmarks`` PointCloud2 and ``/slam/landmark_markers`` ellipsoids),
+``/slam/particles`` (PoseArray of every particle's robot poses) and ``/diagnostics``.
 
-Bad input is counted, never raised out of a callback: unknown frames, malformed clouds, observation
-sets older than the robot's last update, and sets that arrive before any odometry.
+Bad input is counted (``/diagnostics``), never raised out of a callback: unknown robot namespaces
+(found by looking at the graph), wrong frames, malformed clouds, stale or duplicated stamps,
+clock jumps back, sets without odometry. With ``output_dir`` set, the node writes ``slam.json``
+(step latency, drops, landmark count) and ``map.npz`` (the best particle's landmarks) when it
+shuts down.
 """
 
 from __future__ import annotations
 
+import json
+import re
 import sys
-from collections import Counter, deque
-from dataclasses import dataclass, field
+from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
-from geometry_msgs.msg import PoseWithCovarianceStamped
-from nav_msgs.msg import Odometry, Path
+from geometry_msgs.msg import PoseArray, PoseWithCovarianceStamped
+from nav_msgs.msg import Odometry, Path as PathMsg
 from rclpy.node import Node
 from sensor_msgs.msg import PointCloud2
 from tf2_msgs.msg import TFMessage
+from visualization_msgs.msg import MarkerArray
 
-from mrslam_core.evaluation.metrics import interpolate_poses
-from mrslam_core.geometry.se2 import between, compose, inverse
-from mrslam_core.slam.config import FilterConfig
-from mrslam_core.slam.filter import MultiRobotFastSLAM, RobotUpdate
+from mrslam_core.evaluation.report import latency_summary
+from mrslam_core.geometry.se2 import compose, inverse
+from mrslam_core.pipelines.central import CentralConfig, CentralMapper
+from mrslam_core.types import ObservationSet
 from mrslam_ros.conversions import (
     ConversionError,
     cloud_to_observations,
+    landmark_markers,
     odometry_to_pose,
     path_msg,
+    pose_array_msg,
     pose_with_covariance,
     transform_msg,
 )
+from mrslam_ros.diagnostics import Diagnostics
 from mrslam_ros.params import declare_config, read_config
 from mrslam_ros.spin import run_node
 
+_OBS_TOPIC = re.compile(r"^/([^/]+)/observations$")
+
 
 @dataclass(frozen=True)
-class SlamNodeConfig:
-    """The central node.
+class SlamNodeConfig(CentralConfig):
+    """The central node: the mapper's fields plus what the node publishes.
 
     Attributes:
-        robots: robot names (topic namespaces and frame prefixes).
-        start_poses: known start poses, x y θ per robot in ``robots`` order (map frame).
         map_frame: name of the map frame.
-        odom_buffer: odometry messages kept per robot for interpolation.
-        filter: the multi-robot filter.
+        map_period: period of the landmark, particle and diagnostics messages [s].
+        max_markers: landmarks drawn as ellipsoids at most (the cloud has all).
+        output_dir: folder for slam.json and map.npz at shutdown ("" = none).
     """
 
-    robots: tuple[str, ...] = ("robot1",)
-    start_poses: tuple[float, ...] = (0.0, 0.0, 0.0)
     map_frame: str = "map"
-    odom_buffer: int = 2000
-    filter: FilterConfig = field(default_factory=FilterConfig)
+    map_period: float = 1.0
+    max_markers: int = 2000
+    output_dir: str = ""
+
+
+def points_cloud(mean: np.ndarray, stamp_ns: int, frame_id: str) -> PointCloud2:
+    """Landmark means (N, 3) [m] -> a PointCloud2 with x y z (covariances go as markers)."""
+    from mrslam_ros.conversions import observations_to_cloud
+
+    n = len(mean)
+    obs = ObservationSet("map", stamp_ns, np.asarray(mean, float).reshape(n, 3), np.zeros((n, 3, 3)))
+    return observations_to_cloud(obs, frame_id)
 
 
 class SlamNode(Node):
-    """Thin wrapper: convert, call :class:`MultiRobotFastSLAM`, publish."""
+    """Thin wrapper: convert, call :class:`CentralMapper`, publish."""
 
     def __init__(self, name: str = "slam", **kwargs):
         super().__init__(name, **kwargs)
         declare_config(self, SlamNodeConfig())
         self.cfg = read_config(self, SlamNodeConfig)
-        robots = list(self.cfg.robots)
-        starts = np.asarray(self.cfg.start_poses, float).reshape(len(robots), 3)
-        self.slam = MultiRobotFastSLAM(self.cfg.filter, robots, starts)
-        self.drops: Counter[str] = Counter()
-        self.odom: dict[str, deque] = {r: deque(maxlen=self.cfg.odom_buffer) for r in robots}
-        self.last: dict[str, tuple[int, np.ndarray]] = {}  # robot -> (stamp, odom pose) of last update
+        self.mapper = CentralMapper(self.cfg)
+        self.diag = Diagnostics(self, period=self.cfg.map_period)
+        robots = self.mapper.robots
         self.paths: dict[str, list[tuple[int, np.ndarray]]] = {r: [] for r in robots}
         self.pose_pub = {r: self.create_publisher(PoseWithCovarianceStamped, f"/{r}/pose", 10) for r in robots}
-        self.path_pub = {r: self.create_publisher(Path, f"/{r}/path", 10) for r in robots}
+        self.path_pub = {r: self.create_publisher(PathMsg, f"/{r}/path", 10) for r in robots}
         self.tf_pub = self.create_publisher(TFMessage, "/tf", 100)
+        self.cloud_pub = self.create_publisher(PointCloud2, "/slam/landmarks", 1)
+        self.marker_pub = self.create_publisher(MarkerArray, "/slam/landmark_markers", 1)
+        self.particle_pub = self.create_publisher(PoseArray, "/slam/particles", 1)
         for r in robots:
             self.create_subscription(Odometry, f"/{r}/odom", lambda m, r=r: self.on_odom(r, m), 100)
-            self.create_subscription(PointCloud2, f"/{r}/observations", lambda m, r=r: self.on_observations(r, m), 20)
+            self.create_subscription(PointCloud2, f"/{r}/observations", lambda m, r=r: self.on_observations(r, m), 50)
+        self.unknown: set[str] = set()
+        self.create_timer(self.cfg.map_period, self.on_timer)
 
+    # ------------------------------------------------------------------ callbacks
     def on_odom(self, robot: str, msg: Odometry) -> None:
         try:
             stamp, pose, _ = odometry_to_pose(msg)
-        except ConversionError:
-            self.drops["bad_odometry"] += 1
+        except ConversionError as exc:
+            self.diag.count("bad_odometry", f"{robot}: {exc}")
             return
-        buf = self.odom[robot]
-        if buf and stamp <= buf[-1][0]:
-            self.drops["odometry_out_of_order"] += 1
-            return
-        buf.append((stamp, pose))
-
-    def odom_at(self, robot: str, stamp: int) -> np.ndarray | None:
-        """Odometry pose of ``robot`` at ``stamp`` (interpolated), None outside what was received."""
-        buf = self.odom[robot]
-        if not buf or stamp < buf[0][0] or stamp > buf[-1][0]:
-            return None
-        t = np.array([s for s, _ in buf], float)
-        poses = np.array([p for _, p in buf])
-        return interpolate_poses(np.array([float(stamp)]), t, poses)[0]
+        self.mapper.add_odometry(robot, stamp, pose)
+        self.diag.mirror(self.mapper.drops, detail=robot)
 
     def on_observations(self, robot: str, msg: PointCloud2) -> None:
         if msg.header.frame_id not in (f"{robot}/base_link", "base_link"):
-            self.drops["wrong_frame"] += 1
+            self.diag.count("wrong_frame", f"{robot}: observations in {msg.header.frame_id!r}")
             return
         try:
             obs = cloud_to_observations(msg, robot)
-        except ConversionError:
-            self.drops["bad_cloud"] += 1
+        except ConversionError as exc:
+            self.diag.count("bad_cloud", f"{robot}: {exc}")
             return
-        odom = self.odom_at(robot, obs.stamp_ns)
-        if odom is None:
-            self.drops["no_odometry_at_stamp"] += 1
-            return
-        prev = self.last.get(robot)
-        if prev is not None and obs.stamp_ns <= prev[0]:
-            self.drops["stale_stamp"] += 1
-            return
-        # the first update moves the robot from where its odometry started (at its start pose)
-        reference = self.odom[robot][0][1] if prev is None else prev[1]
-        delta = between(reference, odom)
-        self.slam.step([RobotUpdate(robot, obs.stamp_ns, delta, obs)])
-        self.last[robot] = (obs.stamp_ns, odom)
-        self.publish(robot, obs.stamp_ns, odom)
+        self.mapper.add_observations(obs)
+        for done in self.mapper.process():
+            self.publish(done.robot, done.stamp_ns, done.pose, done.cov, done.odom)
+        self.diag.mirror(self.mapper.drops, detail=robot)
+        self.diag.mirror(self.mapper.slam.dropped, "filter_", robot)
 
-    def publish(self, robot: str, stamp: int, odom: np.ndarray) -> None:
-        est = self.slam.estimate()
-        k = self.slam.index[robot]
-        pose = est.mean[k]
-        self.pose_pub[robot].publish(pose_with_covariance(pose, est.cov[k], stamp, self.cfg.map_frame))
+    def on_timer(self) -> None:
+        self._look_for_unknown_robots()
+        _, mean, cov, _, _ = self.mapper.slam.best_map()
+        stamp = self.get_clock().now().nanoseconds
+        if len(mean):
+            self.cloud_pub.publish(points_cloud(mean, stamp, self.cfg.map_frame))
+            if self.marker_pub.get_subscription_count():
+                n = min(len(mean), self.cfg.max_markers)
+                self.marker_pub.publish(landmark_markers(mean[:n], cov[:n], stamp, self.cfg.map_frame))
+        if self.particle_pub.get_subscription_count():
+            poses = self.mapper.slam.poses.reshape(-1, 3)
+            self.particle_pub.publish(pose_array_msg(poses, stamp, self.cfg.map_frame))
+        ms = np.asarray(self.mapper.update_ms[-500:])
+        if ms.size:
+            s = latency_summary(ms)
+            for key in ("p50", "p95", "max"):
+                self.diag.set(f"update_ms.{key}", s[key])
+        self.diag.set("landmarks", float(len(mean)))
+        self.diag.set("queued", float(self.mapper.queued))
+        self.diag.set("updates", float(len(self.mapper.update_ms)))
+
+    def _look_for_unknown_robots(self) -> None:
+        for topic, _ in self.get_topic_names_and_types():
+            m = _OBS_TOPIC.match(topic)
+            if m and m.group(1) not in self.mapper.robots and topic not in self.unknown:
+                self.unknown.add(topic)
+                self.diag.count("unknown_robot", f"{topic} is published but {m.group(1)!r} is not in robots")
+
+    # ------------------------------------------------------------------ output
+    def publish(self, robot: str, stamp: int, pose: np.ndarray, cov: np.ndarray, odom: np.ndarray) -> None:
+        self.pose_pub[robot].publish(pose_with_covariance(pose, cov, stamp, self.cfg.map_frame))
         self.paths[robot].append((stamp, pose))
         stamps = np.array([s for s, _ in self.paths[robot]])
         self.path_pub[robot].publish(path_msg(np.array([p for _, p in self.paths[robot]]), stamps, self.cfg.map_frame))
         map_to_odom = compose(pose, inverse(odom))  # map <- odom = map <- base ⊕ base <- odom
         self.tf_pub.publish(TFMessage(transforms=[transform_msg(map_to_odom, stamp, self.cfg.map_frame, f"{robot}/odom")]))
+
+    def write_outputs(self) -> None:
+        """slam.json and map.npz into ``output_dir`` (nothing when it is empty)."""
+        if not self.cfg.output_dir:
+            return
+        out = Path(self.cfg.output_dir)
+        out.mkdir(parents=True, exist_ok=True)
+        slots, mean, cov, desc, count = self.mapper.slam.best_map()
+        np.savez(out / "map.npz", slots=slots, mean=mean, cov=cov, descriptors=desc, count=count)
+        drops = dict(self.diag.drops)
+        stats = {
+            "update_ms": latency_summary(np.asarray(self.mapper.update_ms)),
+            "update_ms_all": [round(x, 3) for x in self.mapper.update_ms],
+            "updates": {r: len(p) for r, p in self.paths.items()},
+            "landmarks": int(len(mean)),
+            "dropped": drops,
+            "queued_at_end": self.mapper.queued,
+        }
+        (out / "slam.json").write_text(json.dumps(stats, indent=1))
+
+    def destroy_node(self) -> None:
+        try:
+            self.write_outputs()
+        finally:
+            super().destroy_node()
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -69,11 +69,11 @@ def test_slam_node_tracks_two_robots():
         while time.time() < end and min(len(v) for v in got.values()) < steps - 1:
             ex.spin_once(timeout_sec=0.05)
         for r in world.robots:
-            assert len(got[r]) >= steps - 5, (r, len(got[r]), dict(slam.drops))
+            assert len(got[r]) >= steps - 5, (r, len(got[r]), dict(slam.diag.drops))
             last = got[r][-1]
             stamp = last.header.stamp.sec * 1_000_000_000 + last.header.stamp.nanosec
             err = np.linalg.norm(msg_to_pose(last.pose.pose)[:2] - truth_at[(r, stamp)][:2])
-            assert err < 0.3, (r, err, dict(slam.drops))
-        assert slam.slam.landmarks.size > 50  # one shared map
+            assert err < 0.3, (r, err, dict(slam.diag.drops))
+        assert slam.mapper.slam.landmarks.size > 50  # one shared map
     finally:
         rclpy.shutdown()

@@ -1,0 +1,224 @@
+"""The central mapper: every robot's odometry and observation sets, in stamp order, into ONE filter.
+
+This is what the central SLAM node does between its subscriptions and its publishers, without ROS,
+so that a live graph, a bag replayed in real time and a bag fed offline make the same filter
+steps in the same order (and, with the same seed, the same estimates).
+
+Ordering: observation sets wait in a queue and are released in stamp order once every *active*
+robot (every robot of the config, unless silent for ``max_wait`` before the newest observation
+stamp, or never heard from within ``max_wait`` of the team's first set) has delivered a set at
+least as new, or once the set is ``max_wait`` older than the newest observation stamp (a late or
+silent robot delays the team by at most ``max_wait``; odometry does not advance this clock, so
+frontends that lag behind the odometry do not reorder anything). A released set is paired with the robot's odometry
+interpolated at its stamp; the motion since the robot's previous update is the filter's
+odometry input. Everything that cannot be used is counted in :attr:`CentralMapper.drops`.
+"""
+
+from __future__ import annotations
+
+import heapq
+import time
+from collections import Counter, deque
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from mrslam_core.evaluation.metrics import interpolate_poses
+from mrslam_core.geometry.se2 import between
+from mrslam_core.slam.config import FilterConfig
+from mrslam_core.slam.filter import FilterInputError, MultiRobotFastSLAM, RobotUpdate
+from mrslam_core.types import ObservationSet
+
+
+@dataclass(frozen=True)
+class CentralConfig:
+    """The central mapper.
+
+    Attributes:
+        robots: robot names (topic namespaces and frame prefixes), the K axis of the filter.
+        start_poses: known start poses, x y θ per robot in ``robots`` order (map frame) [m, rad].
+        odom_buffer: odometry poses kept per robot for interpolation.
+        max_wait: longest a set waits for the other robots' sets of the same time [s].
+        max_queue: observation sets held at most; beyond it the oldest is dropped and counted.
+        filter: the multi-robot filter.
+    """
+
+    robots: tuple[str, ...] = ("robot1",)
+    start_poses: tuple[float, ...] = (0.0, 0.0, 0.0)
+    odom_buffer: int = 2000
+    max_wait: float = 1.0
+    max_queue: int = 200
+    filter: FilterConfig = field(default_factory=FilterConfig)
+
+
+@dataclass(frozen=True)
+class Processed:
+    """One filter update the mapper made.
+
+    Attributes:
+        robot: whose update.
+        stamp_ns: its stamp [ns].
+        pose: (3,) the robot's weighted-mean pose after the update, map frame.
+        cov: (3, 3) its covariance.
+        odom: (3,) the robot's odometry pose at the stamp, odom frame.
+        step_ms: wall time of the filter step [ms].
+    """
+
+    robot: str
+    stamp_ns: int
+    pose: np.ndarray
+    cov: np.ndarray
+    odom: np.ndarray
+    step_ms: float
+
+
+class CentralMapper:
+    """Queue, order and pair the team's messages; run the filter; keep the trajectories.
+
+    Args:
+        cfg: robots, start poses, buffer sizes and the filter.
+    """
+
+    def __init__(self, cfg: CentralConfig):
+        robots = list(cfg.robots)
+        starts = np.asarray(cfg.start_poses, float)
+        if starts.size != 3 * len(robots):
+            raise ValueError(f"start_poses has {starts.size} numbers; {len(robots)} robots need {3 * len(robots)}")
+        self.cfg = cfg
+        self.robots = robots
+        self.slam = MultiRobotFastSLAM(cfg.filter, robots, starts.reshape(len(robots), 3))
+        self.drops: Counter[str] = Counter()
+        self.update_ms: list[float] = []
+        self.trajectory: dict[str, list[tuple[int, np.ndarray]]] = {r: [] for r in robots}
+        self._odom: dict[str, deque[tuple[int, np.ndarray]]] = {r: deque(maxlen=cfg.odom_buffer) for r in robots}
+        self._queue: list[tuple[int, int, int, ObservationSet]] = []
+        self._queued: set[tuple[str, int]] = set()
+        self._seq = 0
+        self._latest_obs: dict[str, int] = {}
+        self._last: dict[str, tuple[int, np.ndarray]] = {}
+        self._wait_ns = int(cfg.max_wait * 1e9)
+        self.now_ns = 0  # newest observation stamp received
+        self._first_ns: int | None = None
+
+    # ------------------------------------------------------------------ input
+    def add_odometry(self, robot: str, stamp_ns: int, pose: np.ndarray) -> bool:
+        """Buffer the odometry pose (3,) [m, rad] of ``robot`` at ``stamp_ns``; False if dropped."""
+        if robot not in self._odom:
+            self.drops["unknown_robot"] += 1
+            return False
+        pose = np.asarray(pose, float)
+        if pose.shape != (3,) or not np.isfinite(pose).all():
+            self.drops["bad_odometry"] += 1
+            return False
+        buf = self._odom[robot]
+        if buf and stamp_ns <= buf[-1][0]:
+            self.drops["odometry_out_of_order" if stamp_ns < buf[-1][0] else "odometry_duplicate_stamp"] += 1
+            return False
+        buf.append((int(stamp_ns), pose))
+        return True
+
+    def add_observations(self, obs: ObservationSet) -> bool:
+        """Queue an observation set (base_link of ``obs.robot``); False if dropped."""
+        if obs.robot not in self._odom:
+            self.drops["unknown_robot"] += 1
+            return False
+        last = self._last.get(obs.robot)
+        if last is not None and obs.stamp_ns <= last[0]:
+            self.drops["stale_stamp"] += 1
+            return False
+        key = (obs.robot, int(obs.stamp_ns))
+        if key in self._queued:
+            self.drops["duplicate_stamp"] += 1
+            return False
+        if len(self._queue) >= self.cfg.max_queue:
+            _, _, _, old = heapq.heappop(self._queue)
+            self._queued.discard((old.robot, old.stamp_ns))
+            self.drops["queue_overflow"] += 1
+        heapq.heappush(self._queue, (int(obs.stamp_ns), self.robots.index(obs.robot), self._seq, obs))
+        self._queued.add(key)
+        self._seq += 1
+        self._latest_obs[obs.robot] = max(self._latest_obs.get(obs.robot, 0), int(obs.stamp_ns))
+        self.now_ns = max(self.now_ns, int(obs.stamp_ns))
+        if self._first_ns is None:
+            self._first_ns = int(obs.stamp_ns)
+        return True
+
+    @property
+    def queued(self) -> int:
+        """Observation sets waiting."""
+        return len(self._queue)
+
+    # ------------------------------------------------------------------ processing
+    def process(self, flush: bool = False) -> list[Processed]:
+        """Run the filter on every set that is due (all of them with ``flush``), in stamp order."""
+        done = []
+        while self._queue:
+            stamp, _, _, obs = self._queue[0]
+            overdue = flush or self.now_ns - stamp > self._wait_ns
+            if not overdue and not self._others_caught_up(obs.robot, stamp):
+                break
+            buf = self._odom[obs.robot]
+            if not buf or buf[-1][0] < stamp:
+                if not overdue:
+                    break  # its odometry is still on the way
+                heapq.heappop(self._queue)
+                self._queued.discard((obs.robot, stamp))
+                self.drops["no_odometry_at_stamp"] += 1
+                continue
+            heapq.heappop(self._queue)
+            self._queued.discard((obs.robot, stamp))
+            result = self._update(obs)
+            if result is not None:
+                done.append(result)
+        return done
+
+    def _others_caught_up(self, robot: str, stamp: int) -> bool:
+        for other in self.robots:
+            # a robot not heard from yet is waited for from the team's first set on
+            latest = self._latest_obs.get(other, self._first_ns - 1)
+            if other == robot or self.now_ns - latest > self._wait_ns:
+                continue  # a robot silent for longer than max_wait is not waited for
+            if latest < stamp:
+                return False
+        return True
+
+    def _update(self, obs: ObservationSet) -> Processed | None:
+        buf = self._odom[obs.robot]
+        if obs.stamp_ns < buf[0][0]:
+            self.drops["no_odometry_at_stamp"] += 1
+            return None
+        t = np.fromiter((s for s, _ in buf), float, len(buf))
+        poses = np.array([p for _, p in buf])
+        odom = interpolate_poses(np.array([float(obs.stamp_ns)]), t, poses)[0]
+        prev = self._last.get(obs.robot)
+        # the first update moves the robot from where its odometry started (at its start pose)
+        reference = buf[0][1] if prev is None else prev[1]
+        t0 = time.perf_counter()
+        try:
+            self.slam.step([RobotUpdate(obs.robot, obs.stamp_ns, between(reference, odom), obs)])
+        except FilterInputError:
+            self.drops["bad_observations"] += 1
+            return None
+        ms = (time.perf_counter() - t0) * 1e3
+        self.update_ms.append(ms)
+        self._last[obs.robot] = (obs.stamp_ns, odom)
+        est = self.slam.estimate()
+        k = self.slam.index[obs.robot]
+        self.trajectory[obs.robot].append((obs.stamp_ns, est.mean[k].copy()))
+        return Processed(obs.robot, obs.stamp_ns, est.mean[k].copy(), est.cov[k].copy(), odom, ms)
+
+    # ------------------------------------------------------------------ results
+    def trajectories(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+        """robot -> (stamps (N,) [ns], poses (N, 3) map frame) of every update made."""
+        out = {}
+        for r, rows in self.trajectory.items():
+            stamps = np.array([s for s, _ in rows], np.int64)
+            poses = np.array([p for _, p in rows]).reshape(-1, 3)
+            out[r] = (stamps, poses)
+        return out
+
+    def counters(self) -> dict[str, int]:
+        """Drops of the mapper and of the filter, by reason."""
+        out = Counter(self.drops)
+        out.update({f"filter_{k}": v for k, v in self.slam.dropped.items()})
+        return dict(out)

@@ -1,0 +1,242 @@
+"""``mrslam demo``: a simulated team, closed loop, as separate ROS 2 processes talking over DDS.
+
+Starts the simulator node (pybullet, /clock), one stereo frontend per robot (namespace /robotN),
+the central SLAM node and the exploration node (which also runs every robot's path follower),
+all on simulated time; records a rosbag2 of the run from this process (odometry, ground truth,
+observations, scans, estimates, commands, /map, /tf, /diagnostics; images with
+``--record-images``); stops everything after ``--seconds`` of simulated time; and writes the run
+folder: ``report.json`` (ATE/RPE per robot against the simulator's ground truth, the central
+node's step latency, drops, explored share), ``trajectories/*.tum``, plots, ``config.yaml``,
+``slam.yaml`` (the central node's parameters, which ``mrslam replay --offline`` reads), ``bag/``
+and ``logs/`` (one log per node).
+
+The parameters of every node come from one :class:`DemoConfig`, whose ``team`` part is the same
+:class:`mrslam_core.pipelines.team.TeamConfig` the one-process ``mrslam team`` runs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from mrslam_core.configio import ConfigError, load_yaml, to_dict, write_yaml
+from mrslam_core.pipelines.team import TeamConfig
+
+RECORDED = ("odom", "ground_truth", "observations", "scan", "pose", "cmd_vel", "goal",
+            "stereo/left/camera_info", "stereo/right/camera_info")
+IMAGES = ("stereo/left/image_raw", "stereo/right/image_raw")
+
+
+@dataclass(frozen=True)
+class DemoConfig:
+    """The multi-process demo.
+
+    Attributes:
+        real_time_factor: simulated seconds per wall second of the simulator node (lower it when
+            the frontends cannot keep up on a slow machine).
+        max_wait: how long the central node waits for a late robot's observations [s].
+        record_images: also record the stereo images (large: about 2.3 MB/s for 3 robots).
+        storage: bag storage, "sqlite3" or "mcap".
+        startup_timeout: wall seconds allowed until the first /clock message [s].
+        team: team size, duration, world, frontend, filter, exploration (shared with ``mrslam team``).
+    """
+
+    real_time_factor: float = 0.5
+    max_wait: float = 1.0
+    record_images: bool = False
+    storage: str = "sqlite3"
+    startup_timeout: float = 60.0
+    team: TeamConfig = field(default_factory=TeamConfig)
+
+
+def world_facts(cfg: TeamConfig) -> dict:
+    """Start poses, camera mount and reachable free cells of the simulated world (no rendering)."""
+    from mrslam_core.sim.simulation import Simulation
+
+    sim = Simulation(cfg.sim)
+    try:
+        names = [f"robot{i + 1}" for i in range(cfg.robots)]
+        for n in names:
+            sim.add_robot(n)
+        return {
+            "names": names,
+            "starts": np.array([sim.ground_truth(n) for n in names]),
+            "t_base_cam": sim.camera_extrinsic(),
+            "truth_free": sim.world.reachable_free(cfg.grid.resolution),
+        }
+    finally:
+        sim.close()
+
+
+def slam_params(cfg: DemoConfig, facts: dict, out: Path):
+    """The central node's config (a :class:`SlamNodeConfig`)."""
+    from mrslam_ros.slam_node import SlamNodeConfig
+
+    return SlamNodeConfig(robots=tuple(facts["names"]), start_poses=tuple(float(v) for v in facts["starts"].ravel()),
+                          max_wait=cfg.max_wait, filter=cfg.team.filter, output_dir=str(out / "slam"))
+
+
+def launch_config(cfg: DemoConfig, facts: dict, out: Path):
+    """The node processes of the demo."""
+    from mrslam_ros.launch import LaunchConfig, NodeSpec
+
+    team = cfg.team
+    names = facts["names"]
+    nodes = [NodeSpec(module="mrslam_ros.sim_node", name="sim", use_sim_time=False,
+                      params={"robots": team.robots, "real_time_factor": cfg.real_time_factor, "sim": to_dict(team.sim)})]
+    t_base_cam = [float(v) for v in np.asarray(facts["t_base_cam"]).ravel()]
+    for n in names:
+        nodes.append(NodeSpec(module="mrslam_ros.frontend_node", name="frontend", namespace=n,
+                              params={"robot": n, "t_base_cam": t_base_cam, "frontend": to_dict(team.frontend)}))
+    nodes.append(NodeSpec(module="mrslam_ros.slam_node", name="slam", params=to_dict(slam_params(cfg, facts, out))))
+    nodes.append(NodeSpec(module="mrslam_ros.explore_node", name="explore",
+                          params={"robots": list(names), "control_period": team.control_period,
+                                  "exploration": to_dict(team.exploration), "grid": to_dict(team.grid)}))
+    return LaunchConfig(use_sim_time=True, log_dir=str(out / "logs"), stop_timeout=10.0, nodes=tuple(nodes))
+
+
+def run(cfg: DemoConfig, out: Path, log=sys.stdout) -> dict:
+    """Run the team, record it, stop it; returns what the report needs."""
+    import rclpy
+    from rclpy.parameter import Parameter
+
+    from mrslam_ros.bag import BagRecorder
+    from mrslam_ros.launch import Launcher
+
+    facts = world_facts(cfg.team)
+    out.mkdir(parents=True, exist_ok=True)
+    write_yaml(slam_params(cfg, facts, out), out / "slam.yaml")
+    bag = out / "bag"
+    if bag.exists():
+        raise FileExistsError(f"{bag} exists: choose another --out or remove it")
+    topics = ["/clock", "/tf", "/map", "/diagnostics"]
+    for n in facts["names"]:
+        topics += [f"/{n}/{t}" for t in RECORDED + (IMAGES if cfg.record_images else ())]
+    launcher = Launcher(launch_config(cfg, facts, out), log=open(out / "nodes.log", "w"))
+    rclpy.init(args=[])
+    node = rclpy.create_node("mrslam_demo", parameter_overrides=[Parameter("use_sim_time", value=True)])
+    recorder = BagRecorder(node, bag, topics, cfg.storage)
+    end_ns = int(cfg.team.seconds * 1e9)
+    wall0 = time.monotonic()
+    failed: list[str] = []
+    try:
+        launcher.start()
+        print(f"demo: started {len(launcher.procs)} node processes; logs in {out / 'logs'}", file=log, flush=True)
+        next_report = 10e9
+        while True:
+            rclpy.spin_once(node, timeout_sec=0.05)
+            now = node.get_clock().now().nanoseconds
+            if now >= end_ns:
+                break
+            failed = launcher.failed()
+            if failed:
+                print(f"demo: node(s) {failed} exited early; stopping", file=log, flush=True)
+                break
+            if now == 0 and time.monotonic() - wall0 > cfg.startup_timeout:
+                failed = ["sim (no /clock)"]
+                print(f"demo: no /clock after {cfg.startup_timeout:.0f} s; stopping", file=log, flush=True)
+                break
+            if now >= next_report:
+                print(f"demo: t = {now * 1e-9:5.0f} s (wall {time.monotonic() - wall0:5.0f} s)", file=log, flush=True)
+                next_report += 10e9
+    finally:
+        codes = launcher.stop()
+        recorder.close()
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return {"facts": facts, "bag": bag, "exit_codes": codes, "failed": failed,
+            "wall_s": time.monotonic() - wall0, "counts": dict(recorder.counts)}
+
+
+def write_report(cfg: DemoConfig, out: Path, facts: dict, extra: dict | None = None,
+                 est: dict | None = None, slam_stats: dict | None = None, map_npz: Path | None = None) -> dict:
+    """The run folder from the bag (estimates from ``/<robot>/pose`` unless ``est`` is given)."""
+    from mrslam_core.evaluation.report import write_run
+    from mrslam_core.exploration.coverage import explored_fraction
+    from mrslam_ros.conversions import occupancy_to_arrays
+    from mrslam_ros.runlog import diagnostics, evaluation_trajectories, last_message, read_series
+
+    bag = out / "bag"
+    names = facts["names"]
+    series = read_series(bag, names)
+    if est is None:
+        est = {r: series[r]["pose"].arrays() for r in names}
+    starts = {r: facts["starts"][i] for i, r in enumerate(names)}
+    trajectories = evaluation_trajectories(est, series, starts)
+    explored = None
+    grid = last_message(bag, "/map")
+    if grid is not None:
+        _, known, origin, res = occupancy_to_arrays(grid)
+        explored = explored_fraction(known, origin, res, facts["truth_free"], cfg.team.grid.resolution)
+    slam_stats = slam_stats or {}
+    landmarks = None
+    if map_npz is not None and map_npz.is_file():
+        with np.load(map_npz) as z:
+            landmarks = {"mean": z["mean"], "cov": z["cov"]}
+    info = {"explored_fraction": explored, "dropped": slam_stats.get("dropped", {}),
+            "diagnostics": diagnostics(bag), "updates": slam_stats.get("updates", {})}
+    info.update(extra or {})
+    return write_run(out, trajectories, cfg, np.asarray(slam_stats.get("update_ms_all", []), float), landmarks,
+                     extra=info)
+
+
+def main(argv: list[str]) -> int:
+    ap = argparse.ArgumentParser(prog="mrslam demo", description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--config", help="YAML with DemoConfig keys (team: TeamConfig keys)")
+    ap.add_argument("--robots", type=int, help="team size")
+    ap.add_argument("--seconds", type=float, help="simulated duration [s]")
+    ap.add_argument("--world", help="simulated world (office, small)")
+    ap.add_argument("--rtf", type=float, help="real-time factor of the simulator")
+    ap.add_argument("--record-images", action="store_true", help="also record the stereo images")
+    ap.add_argument("--out", default="runs/demo", help="run folder (default runs/demo)")
+    args = ap.parse_args(argv)
+    try:
+        cfg = load_yaml(DemoConfig, args.config) if args.config else DemoConfig()
+    except ConfigError as exc:
+        print(f"mrslam demo: {exc}", file=sys.stderr)
+        return 2
+    team = cfg.team
+    if args.robots:
+        team = replace(team, robots=args.robots)
+    if args.seconds:
+        team = replace(team, seconds=args.seconds)
+    if args.world:
+        team = replace(team, sim=replace(team.sim, world=args.world))
+    cfg = replace(cfg, team=team, record_images=cfg.record_images or args.record_images,
+                  real_time_factor=args.rtf or cfg.real_time_factor)
+    out = Path(args.out)
+    print(f"mrslam demo: {team.robots} robots, {team.seconds:.0f} s in world {team.sim.world}, "
+          f"real-time factor {cfg.real_time_factor:g}; writing {out}", flush=True)
+    try:
+        res = run(cfg, out)
+    except FileExistsError as exc:
+        print(f"mrslam demo: {exc}", file=sys.stderr)
+        return 2
+    stats_file = out / "slam" / "slam.json"
+    stats = json.loads(stats_file.read_text()) if stats_file.is_file() else {}
+    if not stats:
+        print(f"mrslam demo: the central node wrote no {stats_file}", file=sys.stderr)
+    report = write_report(cfg, out, res["facts"], slam_stats=stats, map_npz=out / "slam" / "map.npz",
+                          extra={"wall_s": res["wall_s"], "exit_codes": res["exit_codes"],
+                                 "bag_messages": res["counts"], "failed_nodes": res["failed"]})
+    for name, r in report["robots"].items():
+        if "ate_rmse_m" in r:
+            print(f"  {name}: ATE {r['ate_rmse_m']:.3f} m (odometry {r['odom_ate_rmse_m']:.3f} m), "
+                  f"RPE {r['rpe_rmse_m']:.3f} m, {r['poses']} poses")
+    u = report["update_ms"]
+    print(f"  landmarks {report['landmarks']}; explored {report['explored_fraction']}; central step p50 "
+          f"{u['p50']:.1f} p95 {u['p95']:.1f} max {u['max']:.1f} ms; drops {report['dropped']}; "
+          f"wall {res['wall_s']:.0f} s")
+    print(f"report: {out / 'report.json'}")
+    return 1 if res["failed"] else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))

@@ -1,0 +1,153 @@
+"""The central mapper: stamp order across robots, bounded waits, pairing with odometry, counted drops."""
+
+import numpy as np
+
+from mrslam_core.geometry.se2 import compose
+from mrslam_core.pipelines.central import CentralConfig, CentralMapper
+from mrslam_core.slam.config import FilterConfig
+from mrslam_core.types import ObservationSet
+
+S = 1_000_000_000
+
+
+def _cfg(**kw) -> CentralConfig:
+    base = dict(robots=("robot1", "robot2"), start_poses=(0.0, 0.0, 0.0, 0.0, 1.0, 0.0),
+                filter=FilterConfig(num_particles=20, seed=3), max_wait=1.0)
+    base.update(kw)
+    return CentralConfig(**base)
+
+
+def _obs(robot: str, t: float, n: int = 3) -> ObservationSet:
+    rng = np.random.default_rng(int(t * 10) + len(robot))
+    z = np.column_stack([rng.uniform(1, 3, n), rng.uniform(-1, 1, n), rng.uniform(0, 1, n)])
+    return ObservationSet(robot, int(round(t * S)), z, np.tile(np.eye(3) * 0.01, (n, 1, 1)))
+
+
+def _odom(mapper: CentralMapper, robot: str, until: float, start: float = 0.0) -> None:
+    for t in np.arange(start, until + 1e-9, 0.1):
+        mapper.add_odometry(robot, int(round(t * S)), np.array([0.5 * t, 0.0, 0.0]))
+
+
+def _order(done) -> list[tuple[str, float]]:
+    return [(d.robot, round(d.stamp_ns / S, 3)) for d in done]
+
+
+def test_sets_wait_for_the_other_robot_and_go_in_stamp_order():
+    m = CentralMapper(_cfg())
+    _odom(m, "robot1", 5)
+    _odom(m, "robot2", 5)
+    m.add_observations(_obs("robot1", 0.2))
+    m.add_observations(_obs("robot2", 0.2))
+    assert _order(m.process()) == [("robot1", 0.2), ("robot2", 0.2)]
+    m.add_observations(_obs("robot2", 0.6))
+    m.add_observations(_obs("robot2", 0.4))
+    assert m.process() == []  # robot1 has only reached 0.2: both robot2 sets wait
+    m.add_observations(_obs("robot1", 0.5))
+    assert _order(m.process()) == [("robot2", 0.4), ("robot1", 0.5)]
+    assert m.queued == 1
+    m.add_observations(_obs("robot1", 0.8))
+    assert _order(m.process()) == [("robot2", 0.6)]  # robot1@0.8 now waits for robot2
+
+
+def test_a_silent_robot_delays_the_team_by_at_most_max_wait():
+    m = CentralMapper(_cfg(max_wait=1.0))
+    _odom(m, "robot1", 5)
+    _odom(m, "robot2", 5)
+    m.add_observations(_obs("robot1", 0.2))
+    m.add_observations(_obs("robot2", 0.2))
+    m.process()
+    out = []
+    for t in (0.4, 0.6, 0.8, 1.0, 1.2, 1.4):  # robot2 has gone silent
+        m.add_observations(_obs("robot1", t))
+        out += _order(m.process())
+    # robot2 (last heard at 0.2 s) counts as silent once the newest stamp is more than 1 s later
+    assert out == [("robot1", 0.4), ("robot1", 0.6), ("robot1", 0.8), ("robot1", 1.0), ("robot1", 1.2), ("robot1", 1.4)]
+    assert m.process() == [] and m.queued == 0
+    m.add_observations(_obs("robot2", 1.6))  # back: waited for again
+    m.add_observations(_obs("robot1", 1.8))
+    assert _order(m.process()) == [("robot2", 1.6)] and m.queued == 1
+
+
+def test_a_robot_not_heard_yet_is_waited_for_at_the_start_only():
+    m = CentralMapper(_cfg(max_wait=1.0))
+    _odom(m, "robot1", 5)
+    m.add_observations(_obs("robot1", 0.2))
+    m.add_observations(_obs("robot1", 1.1))
+    assert m.process() == []
+    m.add_observations(_obs("robot1", 1.4))
+    assert _order(m.process()) == [("robot1", 0.2), ("robot1", 1.1), ("robot1", 1.4)]
+
+
+def test_odometry_is_interpolated_at_the_set_and_the_first_update_starts_at_the_start_pose():
+    m = CentralMapper(_cfg(filter=FilterConfig(num_particles=50, seed=1, initial_pose_sigma=(0.0, 0.0, 0.0))))
+    _odom(m, "robot1", 2)
+    _odom(m, "robot2", 2)
+    m.add_observations(_obs("robot1", 0.25))
+    m.add_observations(_obs("robot2", 0.25))
+    done = m.process()
+    np.testing.assert_allclose(done[0].odom, [0.125, 0.0, 0.0], atol=1e-12)  # between 0.2 and 0.3
+    # robot2 starts at (0, 1, 0): its odometry moved 0.125 m along x
+    assert abs(done[1].pose[0] - 0.125) < 0.05 and abs(done[1].pose[1] - 1.0) < 0.05
+
+
+def test_bad_input_is_counted_and_leaves_the_filter_alone():
+    m = CentralMapper(_cfg())
+    _odom(m, "robot1", 1)
+    _odom(m, "robot2", 1)
+    assert not m.add_odometry("robot9", 0, np.zeros(3))
+    assert not m.add_odometry("robot1", int(0.5 * S), np.zeros(3))  # back in time
+    assert not m.add_odometry("robot1", int(1.0 * S), np.zeros(3))  # duplicate stamp
+    assert not m.add_odometry("robot1", int(2.0 * S), np.array([np.nan, 0, 0]))
+    assert not m.add_observations(_obs("robot9", 0.2))
+    assert m.add_observations(_obs("robot1", 0.2))
+    assert not m.add_observations(_obs("robot1", 0.2))  # duplicate while queued
+    m.add_observations(_obs("robot2", 0.2))
+    m.process()
+    assert not m.add_observations(_obs("robot1", 0.1))  # older than robot1's last update
+    m.add_observations(_obs("robot1", 3.0))  # no odometry there yet
+    m.add_observations(_obs("robot2", 3.0))
+    assert m.process() == []  # waits for robot1's odometry
+    m.add_observations(_obs("robot2", 4.5))
+    m.add_observations(_obs("robot1", 4.5))
+    m.process()  # 3.0 is overdue now: robot1's is dropped, robot2's has no odometry either
+    assert m.drops == {"unknown_robot": 2, "odometry_out_of_order": 1, "odometry_duplicate_stamp": 1,
+                       "bad_odometry": 1, "duplicate_stamp": 1, "stale_stamp": 1, "no_odometry_at_stamp": 2}
+    assert m.slam.steps == 2
+
+
+def test_queue_overflow_drops_the_oldest():
+    m = CentralMapper(_cfg(max_queue=3))
+    _odom(m, "robot1", 2)
+    m.add_observations(_obs("robot2", 0.1))
+    for t in (0.2, 0.3, 0.4, 0.5):
+        m.add_observations(_obs("robot1", t))  # wait for robot2 (heard at 0.1) until 1.1 s
+    assert m.drops["queue_overflow"] == 2 and m.queued == 3
+
+
+def test_the_same_messages_in_another_arrival_order_give_the_same_estimates():
+    rng = np.random.default_rng(0)
+    msgs = []
+    truth = {"robot1": np.zeros(3), "robot2": np.array([0.0, 1.0, 0.0])}
+    for i in range(1, 40):
+        t = i * 0.2
+        for r in truth:
+            truth[r] = compose(truth[r], np.array([0.1, 0.0, 0.05]))
+            msgs.append(("odom", r, t, truth[r] - (0 if r == "robot1" else np.array([0.0, 1.0, 0.0]))))
+            msgs.append(("obs", r, t, None))
+    # arrival order 1: odometry first; arrival order 2: each robot's observations late and shuffled
+    late = sorted(msgs, key=lambda m: (m[2] + (0.3 if m[0] == "obs" else 0.0) + rng.uniform(0, 0.15), m[1]))
+    odom0 = [("odom", r, 0.0, np.zeros(3)) for r in truth]
+    runs = []
+    for order in (msgs, late):
+        m = CentralMapper(_cfg())
+        for kind, r, t, pose in odom0 + order:
+            if kind == "odom":
+                m.add_odometry(r, int(round(t * S)), pose)
+            else:
+                m.add_observations(_obs(r, t, 6))
+                m.process()
+        m.process(flush=True)
+        runs.append(m.trajectories())
+    for r in truth:
+        np.testing.assert_array_equal(runs[0][r][0], runs[1][r][0])
+        np.testing.assert_array_equal(runs[0][r][1], runs[1][r][1])
