@@ -6,7 +6,7 @@ STAMP  := $(VENV)/.installed
 OUT    ?= runs/demo
 DATA   ?= ../shared/data
 
-.PHONY: venv demo mrclam test bench clean
+.PHONY: venv demo mrclam test bench sample-bag clean
 
 venv: $(STAMP)
 
@@ -21,11 +21,12 @@ $(STAMP): pyproject.toml scripts/build_interfaces.sh $(INTERFACES)
 	scripts/build_interfaces.sh $(VENV)
 	touch $(STAMP)
 
-# The main job: a simulated team of 3 robots exploring the office for 120 s, closed loop in one
-# process (simulator, stereo frontends, one multi-robot filter, coordinated exploration).
+# The main job: a simulated team of 3 robots exploring the office for 120 s, as separate ROS 2
+# processes (simulator, a stereo frontend per robot, the central SLAM node, exploration), recorded
+# into $(OUT)/bag; writes the run folder $(OUT). A previous run folder is moved aside first.
 demo: venv
-	$(VENV)/bin/mrslam team --out $(OUT)
-	@echo "report: $(OUT)/report.json"
+	@if [ -e $(OUT) ]; then rm -rf $(OUT).previous && mv $(OUT) $(OUT).previous; fi
+	$(VENV)/bin/mrslam demo --out $(OUT)
 
 # The joint filter on real multi-robot data (UTIAS MR.CLAM dataset 6 in ../shared/data).
 mrclam: venv
@@ -39,3 +40,10 @@ bench: venv
 
 clean:
 	rm -rf $(VENV) runs build *.egg-info
+
+# Re-record bags/sim2_small (the replay tests' recording): a 2-robot, 20 s run in the small world.
+sample-bag: venv
+	rm -rf build/sim2_small
+	$(VENV)/bin/mrslam demo --robots 2 --seconds 20 --world small --out build/sim2_small
+	rm -rf bags/sim2_small/bag && mkdir -p bags/sim2_small
+	cp -r build/sim2_small/bag build/sim2_small/slam.yaml bags/sim2_small/

@@ -40,15 +40,19 @@ class DemoConfig:
     Attributes:
         real_time_factor: simulated seconds per wall second of the simulator node (lower it when
             the frontends cannot keep up on a slow machine).
-        max_wait: how long the central node waits for a late robot's observations [s].
+        max_wait: how long the central node waits for a late robot's observations [s]; a frontend
+            that falls further behind the others than this reorders the filter's updates.
+        start_delay: wall seconds the simulator waits, once every frontend is subscribed, before
+            time starts (the recorder and the central node discover the graph meanwhile) [s].
         record_images: also record the stereo images (large: about 2.3 MB/s for 3 robots).
         storage: bag storage, "sqlite3" or "mcap".
-        startup_timeout: wall seconds allowed until the first /clock message [s].
+        startup_timeout: wall seconds allowed until simulated time starts [s].
         team: team size, duration, world, frontend, filter, exploration (shared with ``mrslam team``).
     """
 
     real_time_factor: float = 0.5
-    max_wait: float = 1.0
+    max_wait: float = 3.0
+    start_delay: float = 3.0
     record_images: bool = False
     storage: str = "sqlite3"
     startup_timeout: float = 60.0
@@ -89,7 +93,8 @@ def launch_config(cfg: DemoConfig, facts: dict, out: Path):
     team = cfg.team
     names = facts["names"]
     nodes = [NodeSpec(module="mrslam_ros.sim_node", name="sim", use_sim_time=False,
-                      params={"robots": team.robots, "real_time_factor": cfg.real_time_factor, "sim": to_dict(team.sim)})]
+                      params={"robots": team.robots, "real_time_factor": cfg.real_time_factor, "sim": to_dict(team.sim),
+                              "wait_for_frontends": True, "start_delay": cfg.start_delay})]
     t_base_cam = [float(v) for v in np.asarray(facts["t_base_cam"]).ravel()]
     for n in names:
         nodes.append(NodeSpec(module="mrslam_ros.frontend_node", name="frontend", namespace=n,

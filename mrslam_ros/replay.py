@@ -161,7 +161,9 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
     ap.add_argument("--wait", type=float, default=2.0,
                     help="seconds to wait for subscribers of every topic before playing (default 2)")
     ap.add_argument("--offline", action="store_true", help="feed the bag straight into the core (no ROS)")
-    ap.add_argument("--out", help="run folder (with --offline)")
+    ap.add_argument("--out", help="run folder (with --offline; default <bag>_offline)")
+    ap.add_argument("--config", help="central node parameters (with --offline; default slam.yaml beside the bag)")
+    ap.add_argument("--quiet", action="store_true", help="no progress bar (with --offline)")
     return ap.parse_args(argv)
 
 

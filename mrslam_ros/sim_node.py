@@ -9,6 +9,7 @@ follow the simulated time run with ``use_sim_time:=true``.
 from __future__ import annotations
 
 import sys
+import time
 from dataclasses import dataclass, field
 
 from geometry_msgs.msg import Twist
@@ -33,12 +34,18 @@ class SimNodeConfig:
         robots: number of robots (named robot1..robotK, placed at the world's start poses).
         real_time_factor: simulated seconds per wall second (0: as fast as possible).
         steps_per_tick: physics steps per timer tick.
+        wait_for_frontends: hold the simulation at time 0 until every robot's stereo images have
+            a subscriber (so no robot's first frames are lost while its frontend starts).
+        start_delay: wall seconds to wait after that before time starts [s] (lets late
+            subscribers such as a bag recorder discover the graph).
         sim: the simulation.
     """
 
     robots: int = 1
     real_time_factor: float = 1.0
     steps_per_tick: int = 5
+    wait_for_frontends: bool = False
+    start_delay: float = 0.0
     sim: SimConfig = field(default_factory=SimConfig)
 
 
@@ -69,7 +76,21 @@ class SimNode(Node):
             self.create_subscription(Twist, f"/{n}/cmd_vel", lambda m, n=n: self.on_cmd(n, m), 10)
         dt = self.cfg.steps_per_tick / self.cfg.sim.physics_hz
         period = dt / self.cfg.real_time_factor if self.cfg.real_time_factor > 0 else 1e-3
+        self._ready_at: float | None = None if self.cfg.wait_for_frontends else time.monotonic() + self.cfg.start_delay
+        self._started = False
         self.create_timer(period, self.tick)
+
+    def _may_start(self) -> bool:
+        if self._started:
+            return True
+        now = time.monotonic()
+        if self._ready_at is None:
+            if all(self.pubs[n][side].get_subscription_count() > 0 for n in self.names for side in ("left", "right")):
+                self._ready_at = now + self.cfg.start_delay
+                self.get_logger().info(f"every frontend is subscribed; starting in {self.cfg.start_delay:g} s")
+            return False
+        self._started = now >= self._ready_at
+        return self._started
 
     def on_cmd(self, name: str, msg: Twist) -> None:
         try:
@@ -78,6 +99,9 @@ class SimNode(Node):
             self.get_logger().warn(f"{name}: unusable cmd_vel dropped", throttle_duration_sec=5.0)
 
     def tick(self) -> None:
+        if not self._may_start():
+            self.clock_pub.publish(Clock(clock=ns_to_stamp(self.sim.time_ns)))
+            return
         for _ in range(self.cfg.steps_per_tick):
             self.sim.step()
         now = self.sim.time_ns

@@ -11,7 +11,8 @@ particle's landmarks (``/slam/landmarks`` PointCloud2 and ``/slam/landmark_marke
 Bad input is counted (``/diagnostics``), never raised out of a callback: unknown robot namespaces
 (found by looking at the graph), wrong frames, malformed clouds, stale or duplicated stamps,
 clock jumps back, sets without odometry. With ``output_dir`` set, the node writes ``slam.json``
-(step latency, drops, landmark count) and ``map.npz`` (the best particle's landmarks) when it
+(step latency, drops, landmark count), ``map.npz`` (the best particle's landmarks) and
+``estimates.npz`` (``<robot>.t`` [ns] and ``<robot>.pose`` (N, 3) after every update) when it
 shuts down.
 """
 
@@ -171,6 +172,9 @@ class SlamNode(Node):
         out.mkdir(parents=True, exist_ok=True)
         slots, mean, cov, desc, count = self.mapper.slam.best_map()
         np.savez(out / "map.npz", slots=slots, mean=mean, cov=cov, descriptors=desc, count=count)
+        est = self.mapper.trajectories()
+        np.savez(out / "estimates.npz", **{f"{r}.t": t for r, (t, _) in est.items()},
+                 **{f"{r}.pose": p for r, (_, p) in est.items()})
         drops = dict(self.diag.drops)
         stats = {
             "update_ms": latency_summary(np.asarray(self.mapper.update_ms)),
