@@ -275,7 +275,10 @@ class BagRecorder:
         self.skipped: Counter[str] = Counter()
         self._subs: dict[str, Any] = {}
         self.discover()
-        self._timer = node.create_timer(discover_period, self.discover)
+        from rclpy.clock import Clock, ClockType
+
+        # graph look-ups on the steady clock: under use_sim_time a paused /clock must not stop discovery
+        self._timer = node.create_timer(discover_period, self.discover, clock=Clock(clock_type=ClockType.STEADY_TIME))
 
     @property
     def counts(self) -> Counter[str]:
