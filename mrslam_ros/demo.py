@@ -18,10 +18,12 @@ from __future__ import annotations
 
 import argparse
 import json
+import signal
 import sys
 import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import Literal
 
 import numpy as np
 
@@ -31,6 +33,25 @@ from mrslam_core.pipelines.team import TeamConfig
 RECORDED = ("odom", "ground_truth", "observations", "scan", "pose", "cmd_vel", "goal",
             "stereo/left/camera_info", "stereo/right/camera_info")
 IMAGES = ("stereo/left/image_raw", "stereo/right/image_raw")
+
+
+@dataclass(frozen=True)
+class Fault:
+    """A fault injected into a demo run (the reliability tests use them).
+
+    Attributes:
+        at: simulated time of the fault [s].
+        node: the node's launch label (``slam``, ``explore``, ``robot2/frontend``, ...).
+        action: ``kill``: SIGKILL, then started again ``duration`` simulated seconds later (the
+            central node with ``--resume``, from its checkpoint); ``pause``: SIGSTOP, then SIGCONT
+            ``duration`` simulated seconds later (a robot whose link is down).
+        duration: simulated seconds until the node is restarted or continued [s].
+    """
+
+    at: float
+    node: str
+    action: Literal["kill", "pause"] = "kill"
+    duration: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -47,6 +68,8 @@ class DemoConfig:
         record_images: also record the stereo images (large: about 2.3 MB/s for 3 robots).
         storage: bag storage, "sqlite3" or "mcap".
         startup_timeout: wall seconds allowed until simulated time starts [s].
+        checkpoint_period: wall seconds between the central node's checkpoints [s].
+        faults: faults to inject, in any order.
         team: team size, duration, world, frontend, filter, exploration (shared with ``mrslam team``).
     """
 
@@ -56,6 +79,8 @@ class DemoConfig:
     record_images: bool = False
     storage: str = "sqlite3"
     startup_timeout: float = 60.0
+    checkpoint_period: float = 5.0
+    faults: tuple[Fault, ...] = ()
     team: TeamConfig = field(default_factory=TeamConfig)
 
 
@@ -83,7 +108,8 @@ def slam_params(cfg: DemoConfig, facts: dict, out: Path):
     from mrslam_ros.slam_node import SlamNodeConfig
 
     return SlamNodeConfig(robots=tuple(facts["names"]), start_poses=tuple(float(v) for v in facts["starts"].ravel()),
-                          max_wait=cfg.max_wait, filter=cfg.team.filter, output_dir=str(out / "slam"))
+                          max_wait=cfg.max_wait, filter=cfg.team.filter, output_dir=str(out / "slam"),
+                          checkpoint=str(out / "slam" / "checkpoint.npz"), checkpoint_period=cfg.checkpoint_period)
 
 
 def launch_config(cfg: DemoConfig, facts: dict, out: Path):
@@ -134,12 +160,33 @@ def run(cfg: DemoConfig, out: Path, log=sys.stdout) -> dict:
         launcher.start()
         print(f"demo: started {len(launcher.procs)} node processes; logs in {out / 'logs'}", file=log, flush=True)
         next_report = 10e9
+        pending = sorted(cfg.faults, key=lambda f: f.at)
+        recover: list[tuple[float, Fault]] = []
+        down: set[str] = set()
+        injected = []
         while True:
             rclpy.spin_once(node, timeout_sec=0.05)
             now = node.get_clock().now().nanoseconds
             if now >= end_ns:
                 break
-            failed = launcher.failed()
+            while pending and now >= pending[0].at * 1e9:
+                f = pending.pop(0)
+                launcher.send_signal(f.node, signal.SIGKILL if f.action == "kill" else signal.SIGSTOP)
+                down.add(f.node)
+                recover.append((f.at + f.duration, f))
+                injected.append({"fault": f.action, "node": f.node, "at_s": now * 1e-9, "wall_s": time.monotonic() - wall0})
+                print(f"demo: t = {now * 1e-9:.1f} s: {f.action} {f.node}", file=log, flush=True)
+            for item in [r for r in recover if now >= r[0] * 1e9]:
+                recover.remove(item)
+                f = item[1]
+                if f.action == "kill":
+                    launcher.restart(f.node, ["--resume"] if f.node == "slam" else None)
+                else:
+                    launcher.send_signal(f.node, signal.SIGCONT)
+                down.discard(f.node)
+                injected.append({"recover": f.action, "node": f.node, "at_s": now * 1e-9, "wall_s": time.monotonic() - wall0})
+                print(f"demo: t = {now * 1e-9:.1f} s: {f.node} back", file=log, flush=True)
+            failed = [label for label in launcher.failed() if label not in down]
             if failed:
                 print(f"demo: node(s) {failed} exited early; stopping", file=log, flush=True)
                 break
@@ -150,12 +197,14 @@ def run(cfg: DemoConfig, out: Path, log=sys.stdout) -> dict:
             if now >= next_report:
                 print(f"demo: t = {now * 1e-9:5.0f} s (wall {time.monotonic() - wall0:5.0f} s)", file=log, flush=True)
                 next_report += 10e9
+        for _, f in recover:  # faults still active at the end: undo them so the nodes stop cleanly
+            launcher.send_signal(f.node, signal.SIGCONT)
     finally:
         codes = launcher.stop()
         recorder.close()
         node.destroy_node()
         rclpy.try_shutdown()
-    return {"facts": facts, "bag": bag, "exit_codes": codes, "failed": failed,
+    return {"facts": facts, "bag": bag, "exit_codes": codes, "failed": failed, "faults": injected,
             "wall_s": time.monotonic() - wall0, "counts": dict(recorder.counts)}
 
 
@@ -230,7 +279,7 @@ def main(argv: list[str]) -> int:
         print(f"mrslam demo: the central node wrote no {stats_file}", file=sys.stderr)
     report = write_report(cfg, out, res["facts"], slam_stats=stats, map_npz=out / "slam" / "map.npz",
                           extra={"wall_s": res["wall_s"], "exit_codes": res["exit_codes"],
-                                 "bag_messages": res["counts"], "failed_nodes": res["failed"]})
+                                 "bag_messages": res["counts"], "failed_nodes": res["failed"], "faults": res["faults"]})
     for name, r in report["robots"].items():
         if "ate_rmse_m" in r:
             print(f"  {name}: ATE {r['ate_rmse_m']:.3f} m (odometry {r['odom_ate_rmse_m']:.3f} m), "

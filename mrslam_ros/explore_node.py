@@ -36,12 +36,15 @@ class ExploreNodeConfig:
         control_period: command period [s].
         map_period: /map publication period [s].
         map_frame: frame of the grid and the poses.
+        pose_timeout: a robot whose latest pose is older than this is stopped until a new pose
+            comes (the central node is down, or the robot's observations stopped) [s].
     """
 
     robots: tuple[str, ...] = ("robot1",)
     control_period: float = 0.2
     map_period: float = 2.0
     map_frame: str = "map"
+    pose_timeout: float = 2.0
     exploration: ExplorationConfig = field(default_factory=ExplorationConfig)
     grid: GridConfig = field(default_factory=GridConfig)
 
@@ -56,6 +59,7 @@ class ExploreNode(Node):
         self.grid = Grid(self.cfg.grid)
         self.explorer = Explorer(self.cfg.exploration, list(self.cfg.robots))
         self.poses: dict[str, np.ndarray] = {}
+        self.pose_stamps: dict[str, int] = {}
         self.drops: Counter[str] = Counter()
         self.cmd_pub = {r: self.create_publisher(Twist, f"/{r}/cmd_vel", 10) for r in self.cfg.robots}
         self.goal_pub = {r: self.create_publisher(PoseStamped, f"/{r}/goal", 10) for r in self.cfg.robots}
@@ -73,7 +77,8 @@ class ExploreNode(Node):
             self.drops["bad_pose"] += 1
             return
         self.poses[robot] = pose
-        self.now_ns = max(self.now_ns, stamp_to_ns(msg.header.stamp))
+        self.pose_stamps[robot] = stamp_to_ns(msg.header.stamp)
+        self.now_ns = max(self.now_ns, self.pose_stamps[robot])
 
     def on_scan(self, robot: str, msg: LaserScan) -> None:
         if robot not in self.poses:
@@ -85,7 +90,13 @@ class ExploreNode(Node):
         if len(self.poses) < len(self.cfg.robots):
             return  # every robot must have a pose before targets are shared out
         commands = self.explorer.step(self.grid, self.poses, self.now_ns * 1e-9)
+        clock_ns = self.get_clock().now().nanoseconds
         for robot, (v, w) in commands.items():
+            if clock_ns - self.pose_stamps[robot] > self.cfg.pose_timeout * 1e9:
+                v = w = 0.0  # no fresh estimate: stand still rather than drive blind
+                self.drops["stale_pose"] += 1
+                self.get_logger().warning(f"{robot}: no pose for {(clock_ns - self.pose_stamps[robot]) * 1e-9:.1f} s; "
+                                          "stopped", throttle_duration_sec=5.0)
             twist = Twist()
             twist.linear.x, twist.angular.z = float(v), float(w)
             self.cmd_pub[robot].publish(twist)

@@ -137,6 +137,7 @@ class Launcher:
         self._tmp = tempfile.TemporaryDirectory(prefix="mrslam_launch_")
         self._lock = threading.Lock()
         self._threads: list[threading.Thread] = []
+        self._logged: set[str] = set()
 
     def _path(self, p: str) -> Path:
         path = Path(p)
@@ -174,7 +175,9 @@ class Launcher:
         if self.config.log_dir:
             folder = self._path(self.config.log_dir)
             folder.mkdir(parents=True, exist_ok=True)
-            logfile = (folder / f"{spec.label.replace('/', '_')}.log").open("w")
+            mode = "a" if spec.label in self._logged else "w"  # a restarted node continues its log
+            self._logged.add(spec.label)
+            logfile = (folder / f"{spec.label.replace('/', '_')}.log").open(mode)
         try:
             for line in proc.stdout:  # type: ignore[union-attr]
                 with self._lock:
@@ -194,16 +197,45 @@ class Launcher:
         Raises:
             ConfigError: a params file of the config does not exist (nothing is started then).
         """
-        from mrslam_ros.env import node_env
-
         commands = [(spec, self.command(spec)) for spec in self.config.nodes]
         for spec, cmd in commands:
-            proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-                                    env=node_env(extra=spec.env), start_new_session=True)
-            t = threading.Thread(target=self._pump, args=(spec, proc), daemon=True)
-            t.start()
-            self._threads.append(t)
-            self.procs.append((spec, proc))
+            self.procs.append((spec, self._spawn(spec, cmd)))
+
+    def _spawn(self, spec: NodeSpec, cmd: list[str]) -> subprocess.Popen:
+        from mrslam_ros.env import node_env
+
+        proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                                env=node_env(extra=spec.env), start_new_session=True)
+        t = threading.Thread(target=self._pump, args=(spec, proc), daemon=True)
+        t.start()
+        self._threads.append(t)
+        return proc
+
+    def _find(self, label: str) -> int:
+        for i, (spec, _) in enumerate(self.procs):
+            if spec.label == label:
+                return i
+        raise KeyError(f"no node {label!r} (have {[s.label for s, _ in self.procs]})")
+
+    def send_signal(self, label: str, sig: int) -> None:
+        """Send ``sig`` to the process group of node ``label`` (fault injection, pausing)."""
+        _, proc = self.procs[self._find(label)]
+        try:
+            os.killpg(proc.pid, sig)
+        except ProcessLookupError:
+            pass
+
+    def restart(self, label: str, args: list[str] | None = None, timeout: float = 10.0) -> None:
+        """Start node ``label`` again (after killing it if it still runs), with ``args`` in place of
+        its spec's extra arguments when given (e.g. ``["--resume"]``)."""
+        i = self._find(label)
+        spec, proc = self.procs[i]
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait(timeout=timeout)
+        if args is not None:
+            spec = replace(spec, args=list(args))
+        self.procs[i] = (spec, self._spawn(spec, self.command(spec)))
 
     def exited(self) -> dict[str, int]:
         """Exit codes of the nodes that have exited, by label (negative: killed by that signal)."""

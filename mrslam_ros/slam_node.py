@@ -21,12 +21,15 @@ from __future__ import annotations
 import json
 import re
 import sys
+import time
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 
 import numpy as np
 from geometry_msgs.msg import PoseArray, PoseWithCovarianceStamped
 from nav_msgs.msg import Odometry, Path as PathMsg
+from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from sensor_msgs.msg import PointCloud2
 from tf2_msgs.msg import TFMessage
@@ -62,12 +65,19 @@ class SlamNodeConfig(CentralConfig):
         map_period: period of the landmark, particle and diagnostics messages [s].
         max_markers: landmarks drawn as ellipsoids at most (the cloud has all).
         output_dir: folder for slam.json and map.npz at shutdown ("" = none).
+        checkpoint: file the node's whole state is saved to, atomically, every
+            ``checkpoint_period`` wall seconds and at shutdown ("" = never); docs/checkpoint.md.
+        checkpoint_period: wall seconds between checkpoints [s].
+        resume: start from ``checkpoint`` when it exists (also ``--resume`` on the command line).
     """
 
     map_frame: str = "map"
     map_period: float = 1.0
     max_markers: int = 2000
     output_dir: str = ""
+    checkpoint: str = ""
+    checkpoint_period: float = 10.0
+    resume: bool = False
 
 
 def points_cloud(mean: np.ndarray, stamp_ns: int, frame_id: str) -> PointCloud2:
@@ -82,14 +92,15 @@ def points_cloud(mean: np.ndarray, stamp_ns: int, frame_id: str) -> PointCloud2:
 class SlamNode(Node):
     """Thin wrapper: convert, call :class:`CentralMapper`, publish."""
 
-    def __init__(self, name: str = "slam", **kwargs):
+    def __init__(self, name: str = "slam", resume: bool = False, **kwargs):
         super().__init__(name, **kwargs)
         declare_config(self, SlamNodeConfig())
         self.cfg = read_config(self, SlamNodeConfig)
-        self.mapper = CentralMapper(self.cfg)
+        self.mapper = self._start_mapper(resume or self.cfg.resume)
         self.diag = Diagnostics(self, period=self.cfg.map_period)
+        self.diag.mirror(self.mapper.drops)
         robots = self.mapper.robots
-        self.paths: dict[str, list[tuple[int, np.ndarray]]] = {r: [] for r in robots}
+        self.paths: dict[str, list[tuple[int, np.ndarray]]] = {r: list(self.mapper.trajectory[r]) for r in robots}
         self.pose_pub = {r: self.create_publisher(PoseWithCovarianceStamped, f"/{r}/pose", 10) for r in robots}
         self.path_pub = {r: self.create_publisher(PathMsg, f"/{r}/path", 10) for r in robots}
         self.tf_pub = self.create_publisher(TFMessage, "/tf", 100)
@@ -101,6 +112,26 @@ class SlamNode(Node):
             self.create_subscription(PointCloud2, f"/{r}/observations", lambda m, r=r: self.on_observations(r, m), 50)
         self.unknown: set[str] = set()
         self.create_timer(self.cfg.map_period, self.on_timer)
+        if self.cfg.checkpoint:
+            self.create_timer(self.cfg.checkpoint_period, self.save_checkpoint,
+                              clock=Clock(clock_type=ClockType.STEADY_TIME))
+
+    def _start_mapper(self, resume: bool) -> CentralMapper:
+        path = Path(self.cfg.checkpoint) if self.cfg.checkpoint else None
+        if resume and path is not None and path.is_file():
+            mapper = CentralMapper.resume(self.cfg, path)  # a bad checkpoint stops the node here, loudly
+            n = sum(len(t) for t in mapper.trajectory.values())
+            self.get_logger().info(f"resumed from {path}: {n} updates, {mapper.slam.landmarks.size} landmark slots")
+            return mapper
+        if resume:
+            self.get_logger().warning(f"--resume: no checkpoint at {path or '(checkpoint not set)'}; starting afresh")
+        return CentralMapper(self.cfg)
+
+    def save_checkpoint(self) -> None:
+        """Save the whole state to ``checkpoint`` (atomic: a crash keeps the previous one)."""
+        t0 = time.perf_counter()
+        self.mapper.save(self.cfg.checkpoint)
+        self.diag.set("checkpoint_ms", (time.perf_counter() - t0) * 1e3)
 
     # ------------------------------------------------------------------ callbacks
     def on_odom(self, robot: str, msg: Odometry) -> None:
@@ -188,13 +219,18 @@ class SlamNode(Node):
 
     def destroy_node(self) -> None:
         try:
+            if self.cfg.checkpoint:
+                self.save_checkpoint()
             self.write_outputs()
         finally:
             super().destroy_node()
 
 
 def main(argv: list[str] | None = None) -> int:
-    return run_node(SlamNode, argv)
+    """``python -m mrslam_ros.slam_node [--resume] --ros-args ...``."""
+    argv = list(sys.argv if argv is None else argv)
+    resume = "--resume" in argv
+    return run_node(partial(SlamNode, resume=resume), [a for a in argv if a != "--resume"])
 
 
 if __name__ == "__main__":

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import heapq
 import time
+from pathlib import Path
 from collections import Counter, deque
 from dataclasses import dataclass, field
 
@@ -216,6 +217,59 @@ class CentralMapper:
             poses = np.array([p for _, p in rows]).reshape(-1, 3)
             out[r] = (stamps, poses)
         return out
+
+    # ------------------------------------------------------------------ checkpoints
+    def save(self, path: str | Path) -> Path:
+        """Write the filter and the mapper's own state (odometry buffers, queue, last updates,
+        trajectories, counters) atomically to ``path`` (see :mod:`mrslam_core.slam.checkpoint`)."""
+        from mrslam_core.slam.checkpoint import save_checkpoint
+
+        extra: dict = {"mapper": {
+            "robots": self.robots,
+            "last": {r: [s, *map(float, p)] for r, (s, p) in self._last.items()},
+            "latest_obs": self._latest_obs, "first_ns": self._first_ns, "now_ns": self.now_ns,
+            "seq": self._seq, "drops": dict(self.drops),
+            "queue": [[o.robot, o.stamp_ns] for _, _, _, o in sorted(self._queue, key=lambda e: e[:3])],
+        }, "update_ms": np.asarray(self.update_ms, float)}
+        for i, (_, _, _, o) in enumerate(sorted(self._queue, key=lambda e: e[:3])):
+            extra.update({f"queue_z_{i}": o.z, f"queue_cov_{i}": o.cov, f"queue_desc_{i}": o.descriptors,
+                          f"queue_tracks_{i}": o.track_ids})
+        for k, r in enumerate(self.robots):
+            extra[f"odom_t_{k}"] = np.array([t for t, _ in self._odom[r]], np.int64)
+            extra[f"odom_p_{k}"] = np.array([p for _, p in self._odom[r]], float).reshape(-1, 3)
+            extra[f"traj_t_{k}"] = np.array([t for t, _ in self.trajectory[r]], np.int64)
+            extra[f"traj_p_{k}"] = np.array([p for _, p in self.trajectory[r]], float).reshape(-1, 3)
+        return save_checkpoint(self.slam, path, extra)
+
+    @classmethod
+    def resume(cls, cfg: CentralConfig, path: str | Path) -> CentralMapper:
+        """A mapper in the state :meth:`save` wrote, continuing under ``cfg`` (same robots).
+
+        Raises:
+            CheckpointError: unreadable, or saved for other robots.
+        """
+        from mrslam_core.slam.checkpoint import CheckpointError, load_checkpoint
+
+        slam, extra = load_checkpoint(path)
+        state = extra.get("mapper")
+        if not isinstance(state, dict) or list(state.get("robots", [])) != list(cfg.robots):
+            raise CheckpointError(f"{path}: saved for robots {state and state.get('robots')}, not {list(cfg.robots)}")
+        mapper = cls(cfg)
+        mapper.slam = slam
+        mapper._last = {r: (int(v[0]), np.array(v[1:], float)) for r, v in state["last"].items()}
+        mapper._latest_obs = {r: int(v) for r, v in state["latest_obs"].items()}
+        mapper._first_ns = state["first_ns"]
+        mapper.now_ns, mapper._seq = int(state["now_ns"]), int(state["seq"])
+        mapper.drops = Counter(state["drops"])
+        mapper.update_ms = [float(x) for x in extra["update_ms"]]
+        for k, r in enumerate(mapper.robots):
+            mapper._odom[r].extend(zip(extra[f"odom_t_{k}"].tolist(), extra[f"odom_p_{k}"]))
+            mapper.trajectory[r] = list(zip(extra[f"traj_t_{k}"].tolist(), extra[f"traj_p_{k}"]))
+        for i, (robot, stamp) in enumerate(state["queue"]):
+            mapper.add_observations(ObservationSet(robot, int(stamp), extra[f"queue_z_{i}"], extra[f"queue_cov_{i}"],
+                                                   extra[f"queue_desc_{i}"], extra[f"queue_tracks_{i}"]))
+        mapper.now_ns, mapper._seq = int(state["now_ns"]), int(state["seq"])
+        return mapper
 
     def counters(self) -> dict[str, int]:
         """Drops of the mapper and of the filter, by reason."""

@@ -151,3 +151,41 @@ def test_the_same_messages_in_another_arrival_order_give_the_same_estimates():
     for r in truth:
         np.testing.assert_array_equal(runs[0][r][0], runs[1][r][0])
         np.testing.assert_array_equal(runs[0][r][1], runs[1][r][1])
+
+
+def test_a_resumed_mapper_continues_exactly_like_the_original(tmp_path):
+    a = CentralMapper(_cfg())
+    _odom(a, "robot1", 6)
+    _odom(a, "robot2", 6)
+    for t in (0.2, 0.4, 0.6, 0.8):
+        a.add_observations(_obs("robot1", t, 5))
+        a.add_observations(_obs("robot2", t, 5))
+        a.process()
+    a.add_observations(_obs("robot1", 1.0, 5))  # queued: waits for robot2
+    assert a.queued == 1
+    a.save(tmp_path / "ckpt.npz")
+    b = CentralMapper.resume(_cfg(), tmp_path / "ckpt.npz")
+    assert b.queued == 1 and b.drops == a.drops and len(b.update_ms) == len(a.update_ms)
+    for m in (a, b):
+        for t in (1.0, 1.2, 1.4):
+            m.add_observations(_obs("robot2", t, 5))
+            if t > 1.0:
+                m.add_observations(_obs("robot1", t, 5))
+            m.process()
+        m.process(flush=True)
+    ta, tb = a.trajectories(), b.trajectories()
+    for r in ("robot1", "robot2"):
+        np.testing.assert_array_equal(ta[r][0], tb[r][0])
+        np.testing.assert_array_equal(ta[r][1], tb[r][1])
+    assert len(ta["robot1"][0]) == 7
+
+
+def test_resume_refuses_a_checkpoint_of_other_robots(tmp_path):
+    import pytest
+
+    from mrslam_core.slam.checkpoint import CheckpointError
+
+    a = CentralMapper(_cfg())
+    a.save(tmp_path / "ckpt.npz")
+    with pytest.raises(CheckpointError, match="robots"):
+        CentralMapper.resume(_cfg(robots=("robot1", "robot3")), tmp_path / "ckpt.npz")

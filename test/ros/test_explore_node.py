@@ -22,7 +22,8 @@ def test_explore_node_maps_and_drives():
     rclpy.init()
     try:
         node = ExploreNode(parameter_overrides=[Parameter("control_period", value=0.05),
-                                                Parameter("map_period", value=0.1)])
+                                                Parameter("map_period", value=0.1),
+                                                Parameter("pose_timeout", value=0.5)])
         probe = rclpy.create_node("probe")
         cmds, maps = [], []
         probe.create_subscription(Twist, "/robot1/cmd_vel", cmds.append, 10)
@@ -36,18 +37,23 @@ def test_explore_node_maps_and_drives():
         scan.ranges = [3.0] * 40  # a wall 3 m ahead across a 90° view
         scan.header.frame_id = "robot1/base_link"
         end = time.time() + 15
-        t = 1
         while time.time() < end and not (maps and any(c.linear.x != 0 or c.angular.z != 0 for c in cmds)):
-            pose_pub.publish(pose_with_covariance(np.array([5.0, 5.0, 0.0]), np.eye(3) * 1e-4, t * 10**8, "map"))
-            scan.header.stamp = ns_to_stamp(t * 10**8)
+            now = probe.get_clock().now().nanoseconds
+            pose_pub.publish(pose_with_covariance(np.array([5.0, 5.0, 0.0]), np.eye(3) * 1e-4, now, "map"))
+            scan.header.stamp = ns_to_stamp(now)
             scan_pub.publish(scan)
-            t += 1
             for _ in range(5):
                 ex.spin_once(timeout_sec=0.01)
         assert maps, "no /map"
         data = np.array(maps[-1].data)
         assert (data > 65).sum() > 10 and (data == -1).sum() > 0 and ((data >= 0) & (data < 35)).sum() > 100
         assert any(c.linear.x != 0 or c.angular.z != 0 for c in cmds), "no drive command"
+        # no more poses (the central node went down): after pose_timeout the robot is stopped
+        end = time.time() + 1.5
+        while time.time() < end:
+            ex.spin_once(timeout_sec=0.01)
+        assert cmds[-1].linear.x == 0 and cmds[-1].angular.z == 0
+        assert node.drops["stale_pose"] > 0
         assert node.drops["scan_before_pose"] <= 1
     finally:
         rclpy.shutdown()
