@@ -234,6 +234,7 @@ def write_report(cfg: DemoConfig, out: Path, facts: dict, extra: dict | None = N
         with np.load(map_npz) as z:
             landmarks = {"mean": z["mean"], "cov": z["cov"]}
     info = {"explored_fraction": explored, "dropped": slam_stats.get("dropped", {}),
+            "latency_ms": slam_stats.get("latency_ms"),
             "diagnostics": diagnostics(bag), "updates": slam_stats.get("updates", {})}
     info.update(extra or {})
     return write_run(out, trajectories, cfg, np.asarray(slam_stats.get("update_ms_all", []), float), landmarks,

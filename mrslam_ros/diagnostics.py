@@ -71,12 +71,14 @@ class Diagnostics(Counters):
         name: status name (default: the node's fully qualified name).
         period: seconds between reports (wall or sim time, the node's clock) [s].
         log_period: seconds between log lines of one drop reason [s].
+        lock: held while the counters are read for a report, when other threads count.
     """
 
-    def __init__(self, node, name: str | None = None, period: float = 1.0, log_period: float = 5.0):
+    def __init__(self, node, name: str | None = None, period: float = 1.0, log_period: float = 5.0, lock=None):
         from diagnostic_msgs.msg import DiagnosticArray
 
         super().__init__(log=node.get_logger().warning, log_period=log_period)
+        self._lock = lock
         self.node = node
         self.name = name or node.get_fully_qualified_name()
         self.pub = node.create_publisher(DiagnosticArray, "/diagnostics", 10)
@@ -86,6 +88,10 @@ class Diagnostics(Counters):
         """Publish the counters now."""
         from mrslam_ros.conversions import diagnostics_msg
 
-        counters, level, message = self.snapshot()
+        if self._lock is not None:
+            with self._lock:
+                counters, level, message = self.snapshot()
+        else:
+            counters, level, message = self.snapshot()
         counters.update(extra or {})
         self.pub.publish(diagnostics_msg(self.name, counters, self.node.get_clock().now().nanoseconds, level, message))

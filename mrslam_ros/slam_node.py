@@ -21,7 +21,9 @@ from __future__ import annotations
 import json
 import re
 import sys
+import threading
 import time
+from collections import deque
 from dataclasses import dataclass
 from functools import partial
 from pathlib import Path
@@ -29,6 +31,7 @@ from pathlib import Path
 import numpy as np
 from geometry_msgs.msg import PoseArray, PoseWithCovarianceStamped
 from nav_msgs.msg import Odometry, Path as PathMsg
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from sensor_msgs.msg import PointCloud2
@@ -69,6 +72,10 @@ class SlamNodeConfig(CentralConfig):
             ``checkpoint_period`` wall seconds and at shutdown ("" = never); docs/checkpoint.md.
         checkpoint_period: wall seconds between checkpoints [s].
         resume: start from ``checkpoint`` when it exists (also ``--resume`` on the command line).
+        process_period: wall seconds between runs of the filter on the queued sets [s].
+        process_budget: wall seconds one run may take; the rest waits, so the callbacks keep
+            draining the subscriptions and a flood overflows the mapper's bounded queue (counted,
+            oldest first) instead of the middleware's queues [s].
     """
 
     map_frame: str = "map"
@@ -78,6 +85,8 @@ class SlamNodeConfig(CentralConfig):
     checkpoint: str = ""
     checkpoint_period: float = 10.0
     resume: bool = False
+    process_period: float = 0.01
+    process_budget: float = 0.1
 
 
 def points_cloud(mean: np.ndarray, stamp_ns: int, frame_id: str) -> PointCloud2:
@@ -97,7 +106,11 @@ class SlamNode(Node):
         declare_config(self, SlamNodeConfig())
         self.cfg = read_config(self, SlamNodeConfig)
         self.mapper = self._start_mapper(resume or self.cfg.resume)
-        self.diag = Diagnostics(self, period=self.cfg.map_period)
+        # input callbacks (their own group, so a multi-threaded executor drains the subscriptions
+        # while the filter runs) and everything else share the mapper under this lock
+        self.lock = threading.Lock()
+        inputs = MutuallyExclusiveCallbackGroup()
+        self.diag = Diagnostics(self, period=self.cfg.map_period, lock=self.lock)
         self.diag.mirror(self.mapper.drops)
         robots = self.mapper.robots
         self.paths: dict[str, list[tuple[int, np.ndarray]]] = {r: list(self.mapper.trajectory[r]) for r in robots}
@@ -108,10 +121,14 @@ class SlamNode(Node):
         self.marker_pub = self.create_publisher(MarkerArray, "/slam/landmark_markers", 1)
         self.particle_pub = self.create_publisher(PoseArray, "/slam/particles", 1)
         for r in robots:
-            self.create_subscription(Odometry, f"/{r}/odom", lambda m, r=r: self.on_odom(r, m), 100)
-            self.create_subscription(PointCloud2, f"/{r}/observations", lambda m, r=r: self.on_observations(r, m), 50)
+            self.create_subscription(Odometry, f"/{r}/odom", lambda m, r=r: self.on_odom(r, m), 100,
+                                     callback_group=inputs)
+            self.create_subscription(PointCloud2, f"/{r}/observations", lambda m, r=r: self.on_observations(r, m), 100,
+                                     callback_group=inputs)
         self.unknown: set[str] = set()
+        self.latency_ms: deque[float] = deque(maxlen=100_000)
         self.create_timer(self.cfg.map_period, self.on_timer)
+        self.create_timer(self.cfg.process_period, self.on_process, clock=Clock(clock_type=ClockType.STEADY_TIME))
         if self.cfg.checkpoint:
             self.create_timer(self.cfg.checkpoint_period, self.save_checkpoint,
                               clock=Clock(clock_type=ClockType.STEADY_TIME))
@@ -130,7 +147,8 @@ class SlamNode(Node):
     def save_checkpoint(self) -> None:
         """Save the whole state to ``checkpoint`` (atomic: a crash keeps the previous one)."""
         t0 = time.perf_counter()
-        self.mapper.save(self.cfg.checkpoint)
+        with self.lock:
+            self.mapper.save(self.cfg.checkpoint)
         self.diag.set("checkpoint_ms", (time.perf_counter() - t0) * 1e3)
 
     # ------------------------------------------------------------------ callbacks
@@ -140,8 +158,9 @@ class SlamNode(Node):
         except ConversionError as exc:
             self.diag.count("bad_odometry", f"{robot}: {exc}")
             return
-        self.mapper.add_odometry(robot, stamp, pose)
-        self.diag.mirror(self.mapper.drops, detail=robot)
+        with self.lock:
+            self.mapper.add_odometry(robot, stamp, pose)
+            self.diag.mirror(self.mapper.drops, detail=robot)
 
     def on_observations(self, robot: str, msg: PointCloud2) -> None:
         if msg.header.frame_id not in (f"{robot}/base_link", "base_link"):
@@ -152,15 +171,32 @@ class SlamNode(Node):
         except ConversionError as exc:
             self.diag.count("bad_cloud", f"{robot}: {exc}")
             return
-        self.mapper.add_observations(obs)
-        for done in self.mapper.process():
-            self.publish(done.robot, done.stamp_ns, done.pose, done.cov, done.odom)
-        self.diag.mirror(self.mapper.drops, detail=robot)
-        self.diag.mirror(self.mapper.slam.dropped, "filter_", robot)
+        with self.lock:
+            self.mapper.add_observations(obs)
+            self.diag.mirror(self.mapper.drops, detail=robot)
+
+    def on_process(self) -> None:
+        """Run the filter on what is due, one set at a time under the lock (so the input thread
+        keeps draining the subscriptions), for at most ``process_budget`` s, and publish."""
+        until = time.perf_counter() + self.cfg.process_budget
+        while time.perf_counter() < until:
+            with self.lock:
+                done = self.mapper.process(max_sets=1)
+                self.diag.mirror(self.mapper.drops)
+                self.diag.mirror(self.mapper.slam.dropped, "filter_")
+            if not done:
+                return
+            d = done[0]
+            self.latency_ms.append((self.get_clock().now().nanoseconds - d.stamp_ns) * 1e-6)
+            self.publish(d.robot, d.stamp_ns, d.pose, d.cov, d.odom)
 
     def on_timer(self) -> None:
         self._look_for_unknown_robots()
-        _, mean, cov, _, _ = self.mapper.slam.best_map()
+        with self.lock:
+            _, mean, cov, _, _ = self.mapper.slam.best_map()
+            poses = self.mapper.slam.poses.reshape(-1, 3).copy()
+            update_ms = self.mapper.update_ms[-500:]
+            queued = self.mapper.queued
         stamp = self.get_clock().now().nanoseconds
         if len(mean):
             self.cloud_pub.publish(points_cloud(mean, stamp, self.cfg.map_frame))
@@ -168,16 +204,15 @@ class SlamNode(Node):
                 n = min(len(mean), self.cfg.max_markers)
                 self.marker_pub.publish(landmark_markers(mean[:n], cov[:n], stamp, self.cfg.map_frame))
         if self.particle_pub.get_subscription_count():
-            poses = self.mapper.slam.poses.reshape(-1, 3)
             self.particle_pub.publish(pose_array_msg(poses, stamp, self.cfg.map_frame))
-        ms = np.asarray(self.mapper.update_ms[-500:])
-        if ms.size:
-            s = latency_summary(ms)
-            for key in ("p50", "p95", "max"):
-                self.diag.set(f"update_ms.{key}", s[key])
+        for name, values in (("update_ms", update_ms), ("latency_ms", list(self.latency_ms)[-500:])):
+            if values:
+                s = latency_summary(np.asarray(values))
+                for key in ("p50", "p95", "max"):
+                    self.diag.set(f"{name}.{key}", s[key])
         self.diag.set("landmarks", float(len(mean)))
-        self.diag.set("queued", float(self.mapper.queued))
-        self.diag.set("updates", float(len(self.mapper.update_ms)))
+        self.diag.set("queued", float(queued))
+        self.diag.set("updates", float(len(self.latency_ms)))
 
     def _look_for_unknown_robots(self) -> None:
         for topic, _ in self.get_topic_names_and_types():
@@ -210,6 +245,7 @@ class SlamNode(Node):
         stats = {
             "update_ms": latency_summary(np.asarray(self.mapper.update_ms)),
             "update_ms_all": [round(x, 3) for x in self.mapper.update_ms],
+            "latency_ms": latency_summary(np.asarray(self.latency_ms)),
             "updates": {r: len(p) for r, p in self.paths.items()},
             "landmarks": int(len(mean)),
             "dropped": drops,
@@ -230,7 +266,7 @@ def main(argv: list[str] | None = None) -> int:
     """``python -m mrslam_ros.slam_node [--resume] --ros-args ...``."""
     argv = list(sys.argv if argv is None else argv)
     resume = "--resume" in argv
-    return run_node(partial(SlamNode, resume=resume), [a for a in argv if a != "--resume"])
+    return run_node(partial(SlamNode, resume=resume), [a for a in argv if a != "--resume"], threads=2)
 
 
 if __name__ == "__main__":

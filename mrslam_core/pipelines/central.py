@@ -150,10 +150,12 @@ class CentralMapper:
         return len(self._queue)
 
     # ------------------------------------------------------------------ processing
-    def process(self, flush: bool = False) -> list[Processed]:
-        """Run the filter on every set that is due (all of them with ``flush``), in stamp order."""
-        done = []
-        while self._queue:
+    def process(self, flush: bool = False, budget_s: float | None = None, max_sets: int | None = None) -> list[Processed]:
+        """Run the filter on every set that is due (all of them with ``flush``), in stamp order,
+        or only for about ``budget_s`` wall seconds or ``max_sets`` sets (the rest stays queued)."""
+        done: list[Processed] = []
+        until = None if budget_s is None else time.perf_counter() + budget_s
+        while self._queue and (until is None or time.perf_counter() < until) and (max_sets is None or len(done) < max_sets):
             stamp, _, _, obs = self._queue[0]
             overdue = flush or self.now_ns - stamp > self._wait_ns
             if not overdue and not self._others_caught_up(obs.robot, stamp):
