@@ -47,3 +47,4 @@ sample-bag: venv
 	$(VENV)/bin/mrslam demo --robots 2 --seconds 20 --world small --out build/sim2_small
 	rm -rf bags/sim2_small/bag && mkdir -p bags/sim2_small
 	cp -r build/sim2_small/bag build/sim2_small/slam.yaml bags/sim2_small/
+	sed -i "s#^output_dir:.*#output_dir: ''#; s#^checkpoint:.*#checkpoint: ''#" bags/sim2_small/slam.yaml

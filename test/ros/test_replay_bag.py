@@ -44,6 +44,7 @@ def test_live_replay_with_a_looping_bag_matches_offline(offline, tmp_path):
     cfg = load_yaml(SlamNodeConfig, RECORDING / "slam.yaml")
     params = to_dict(cfg)
     params["output_dir"] = str(tmp_path / "slam")
+    params["checkpoint"] = ""
     launcher = Launcher(LaunchConfig(use_sim_time=True, nodes=[NodeSpec("mrslam_ros.slam_node", "slam", params=params)]),
                         log=open(tmp_path / "nodes.log", "w"))
     rclpy.init()
