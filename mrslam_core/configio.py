@@ -97,6 +97,12 @@ def from_dict(cls: type[T], data: dict[str, Any] | None, prefix: str = "") -> T:
     data = dict(data or {})
     hints = typing.get_type_hints(cls)
     fields = {f.name: f for f in dataclasses.fields(cls) if f.init}
+    odd = [k for k in data if not isinstance(k, str)]
+    if odd:  # e.g. YAML reads `1:`, `null:` or `yes:` as a number, None or a bool
+        raise ConfigError(
+            f"key {prefix}{odd[0]!r} is a {type(odd[0]).__name__}, not a name "
+            f"(known keys of {prefix or 'the config'}: {', '.join(sorted(fields))})"
+        )
     unknown = sorted(set(data) - set(fields))
     if unknown:
         raise ConfigError(

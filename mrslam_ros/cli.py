@@ -17,6 +17,7 @@ COMMANDS = {
     "team": ("mrslam_core.pipelines.team", "a simulated team, closed loop, in one process (no ROS)"),
     "bench": ("mrslam_core.bench", "benchmarks: mrslam bench {filter,frontend,sim,...}"),
     "experiment": ("mrslam_core.experiments", "reproducible experiments behind docs/results.md"),
+    "map": ("mrslam_core.mapio", "export or inspect the best particle's landmark map"),
 }
 
 

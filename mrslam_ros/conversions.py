@@ -39,7 +39,11 @@ def stamp_to_ns(stamp: Time) -> int:
 
 
 def ns_to_stamp(ns: int) -> Time:
-    return Time(sec=int(ns // 1_000_000_000), nanosec=int(ns % 1_000_000_000))
+    """Time [ns] -> builtin_interfaces/Time; ConversionError beyond its int32 seconds."""
+    sec = int(ns) // 1_000_000_000
+    if not -(2**31) <= sec < 2**31:
+        raise ConversionError(f"stamp {ns} ns does not fit builtin_interfaces/Time")
+    return Time(sec=sec, nanosec=int(ns) % 1_000_000_000)
 
 
 # ----------------------------------------------------------------------------- images
@@ -75,7 +79,7 @@ def array_to_image(arr: np.ndarray, encoding: str, stamp_ns: int, frame_id: str)
         raise ConversionError(f"unsupported image encoding {encoding!r}")
     dtype, channels = _ENCODINGS[encoding]
     arr = np.ascontiguousarray(arr, dtype=dtype)
-    if (arr.ndim == 2 and channels != 1) or (arr.ndim == 3 and arr.shape[2] != channels):
+    if not ((arr.ndim == 2 and channels == 1) or (arr.ndim == 3 and arr.shape[2] == channels)):
         raise ConversionError(f"array of shape {arr.shape} does not fit encoding {encoding}")
     msg = Image(height=arr.shape[0], width=arr.shape[1], encoding=encoding, is_bigendian=0,
                 step=arr.shape[1] * channels * arr.itemsize)
@@ -118,6 +122,8 @@ def observations_to_cloud(obs: ObservationSet, frame_id: str) -> PointCloud2:
     """ObservationSet (3D points in base_link) -> PointCloud2 with fields x y z, the six upper
     covariance terms, track_id (int32) and descriptor (float32, count = D), little-endian."""
     b, d = len(obs), obs.descriptors.shape[1]
+    if obs.z.shape[1] != 3:
+        raise ConversionError(f"observation clouds carry 3D points, got dimension {obs.z.shape[1]}")
     fields, offset = [], 0
     for name in ("x", "y", "z") + _COV:
         fields.append(PointField(name=name, offset=offset, datatype=PointField.FLOAT32, count=1))
@@ -197,6 +203,10 @@ def cloud_to_observations(msg: PointCloud2, robot: str) -> ObservationSet:
 
 # ----------------------------------------------------------------------------- poses
 def pose_to_msg(pose: np.ndarray) -> Pose:
+    """Planar pose (x [m], y [m], θ [rad]) (3,) -> geometry_msgs/Pose."""
+    pose = np.asarray(pose, dtype=float)
+    if pose.shape != (3,):
+        raise ConversionError(f"a planar pose must be (3,), got shape {pose.shape}")
     q = yaw_to_quaternion(float(pose[2]))
     msg = Pose()
     msg.position.x, msg.position.y = float(pose[0]), float(pose[1])
@@ -225,14 +235,19 @@ def pose_with_covariance(pose: np.ndarray, cov: np.ndarray, stamp_ns: int, frame
     msg.header.stamp = ns_to_stamp(stamp_ns)
     msg.header.frame_id = frame_id
     msg.pose.pose = pose_to_msg(pose)
-    full = np.zeros((6, 6))
-    full[np.ix_([0, 1, 5], [0, 1, 5])] = cov
-    msg.pose.covariance = full.ravel().tolist()
+    msg.pose.covariance = _planar_cov6(cov)
     return msg
 
 
 def path_msg(poses: np.ndarray, stamps_ns: np.ndarray, frame_id: str) -> Path:
     """(N, 3) planar poses with stamps (N,) -> nav_msgs/Path."""
+    poses, stamps_ns = np.asarray(poses, float), np.asarray(stamps_ns)
+    if poses.size == 0 and stamps_ns.size == 0:  # an empty path (e.g. np.array([]))
+        poses, stamps_ns = poses.reshape(0, 3), stamps_ns.reshape(0)
+    if poses.ndim != 2 or poses.shape[1] != 3 or stamps_ns.shape != (poses.shape[0],):
+        raise ConversionError(
+            f"path needs poses (N, 3) and stamps (N,), got {poses.shape} and {stamps_ns.shape}"
+        )
     msg = Path()
     msg.header.frame_id = frame_id
     if len(stamps_ns):
@@ -303,6 +318,8 @@ def laser_to_scan(msg: LaserScan):
     """
     from mrslam_core.exploration.grid import Scan
 
+    if not np.isfinite([msg.angle_min, msg.angle_increment, msg.range_max]).all():
+        raise ConversionError("laser scan angle_min, angle_increment and range_max must be finite")
     ranges = np.asarray(msg.ranges, float)
     n = ranges.size
     bearings = msg.angle_min + (np.arange(n) + 0.5) * msg.angle_increment
@@ -448,7 +465,10 @@ def landmark_markers(mean: np.ndarray, cov: np.ndarray, stamp_ns: int, frame_id:
     """
     from scipy.spatial.transform import Rotation
 
-    mean, cov = np.asarray(mean, float).reshape(-1, 3), np.asarray(cov, float)
+    mean, cov = np.asarray(mean, float), np.asarray(cov, float)
+    if mean.size % 3:
+        raise ConversionError(f"landmark means must be (N, 3), got shape {mean.shape}")
+    mean = mean.reshape(-1, 3)
     if cov.shape != (len(mean), 3, 3):
         raise ConversionError(f"cov must be ({len(mean)}, 3, 3), got {cov.shape}")
     if not (np.isfinite(mean).all() and np.isfinite(cov).all()):

@@ -70,6 +70,8 @@ class DemoConfig:
         startup_timeout: wall seconds allowed until simulated time starts [s].
         checkpoint_period: wall seconds between the central node's checkpoints [s].
         faults: faults to inject, in any order.
+        node_prefix: per node label, command words before its interpreter, e.g.
+            ``{sim: [ip, netns, exec, robots]}`` to run the robots' side on another (network) host.
         team: team size, duration, world, frontend, filter, exploration (shared with ``mrslam team``).
     """
 
@@ -81,6 +83,7 @@ class DemoConfig:
     startup_timeout: float = 60.0
     checkpoint_period: float = 5.0
     faults: tuple[Fault, ...] = ()
+    node_prefix: dict[str, tuple[str, ...]] = field(default_factory=dict)
     team: TeamConfig = field(default_factory=TeamConfig)
 
 
@@ -129,7 +132,11 @@ def launch_config(cfg: DemoConfig, facts: dict, out: Path):
     nodes.append(NodeSpec(module="mrslam_ros.explore_node", name="explore",
                           params={"robots": list(names), "control_period": team.control_period,
                                   "exploration": to_dict(team.exploration), "grid": to_dict(team.grid)}))
-    return LaunchConfig(use_sim_time=True, log_dir=str(out / "logs"), stop_timeout=10.0, nodes=tuple(nodes))
+    unknown = set(cfg.node_prefix) - {n.label for n in nodes}
+    if unknown:
+        raise ConfigError(f"node_prefix: no nodes {sorted(unknown)} (have {[n.label for n in nodes]})")
+    nodes = [replace(n, prefix=list(cfg.node_prefix.get(n.label, ()))) for n in nodes]
+    return LaunchConfig(use_sim_time=True, log_dir=str(out / "logs"), stop_timeout=10.0, nodes=nodes)
 
 
 def run(cfg: DemoConfig, out: Path, log=sys.stdout) -> dict:
@@ -271,7 +278,7 @@ def main(argv: list[str]) -> int:
           f"real-time factor {cfg.real_time_factor:g}; writing {out}", flush=True)
     try:
         res = run(cfg, out)
-    except FileExistsError as exc:
+    except (FileExistsError, ConfigError) as exc:
         print(f"mrslam demo: {exc}", file=sys.stderr)
         return 2
     stats_file = out / "slam" / "slam.json"

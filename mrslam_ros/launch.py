@@ -63,6 +63,8 @@ class NodeSpec:
         args: extra command-line arguments before ``--ros-args``.
         env: extra environment variables.
         required: when this node exits, every other node is stopped.
+        prefix: command words put before the node's interpreter, e.g. ``[ip, netns, exec, robots]``
+            to run it in another network namespace (another "host"), or ``[taskset, -c, 1]``.
         use_sim_time: this node's ``use_sim_time``, overriding the config's (None: the config's).
             The node that publishes /clock (the simulator) must run on wall time: its timers
             would otherwise wait for a /clock that only they would publish.
@@ -78,6 +80,7 @@ class NodeSpec:
     env: dict[str, str] = field(default_factory=dict)
     required: bool = True
     use_sim_time: bool | None = None
+    prefix: list[str] = field(default_factory=list)
 
     def __post_init__(self) -> None:
         if not self.module or not self.name or "/" in self.name:
@@ -156,7 +159,7 @@ class Launcher:
         Raises:
             ConfigError: a params file of ``spec`` does not exist.
         """
-        cmd = [sys.executable, "-m", spec.module, *spec.args, "--ros-args", "-r", f"__node:={spec.name}"]
+        cmd = [*spec.prefix, sys.executable, "-m", spec.module, *spec.args, "--ros-args", "-r", f"__node:={spec.name}"]
         if spec.namespace.strip("/"):
             cmd += ["-r", f"__ns:=/{spec.namespace.strip('/')}"]
         for src, dst in spec.remap.items():

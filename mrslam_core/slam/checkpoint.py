@@ -1,0 +1,337 @@
+"""Checkpoints of the central filter: one ``.npz`` file that loads without executing code.
+
+A checkpoint holds everything :class:`~mrslam_core.slam.filter.MultiRobotFastSLAM` needs to
+continue exactly where it stopped: the particle poses (M, K, 3), log weights and accumulated log
+likelihoods (M,), the landmark store (copy-on-write chunk pool, chunk tables, per-slot
+descriptors, reference positions and track ids), the robot registry and last stamps, the drop
+counters, the random generator's state and the config. A filter loaded from a checkpoint and the
+filter that wrote it give bit-identical results for the same later inputs.
+
+Layout (see docs/checkpoint.md): ``np.savez`` members, all plain numeric arrays (never object
+arrays, so ``np.load(..., allow_pickle=False)`` reads it), plus ``header``: the UTF-8 bytes (uint8)
+of a JSON object with the format version, the config (the YAML/dict form of
+:mod:`mrslam_core.configio`), the robot registry, counters, the bit generator state and the
+caller's ``extra`` values. The file is written to a temporary file in the same folder, flushed to
+disk and renamed over the target (``os.replace``), so a crash mid-write leaves the previous
+checkpoint intact.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+import time
+import zipfile
+from collections import Counter
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from mrslam_core.configio import ConfigError, from_dict, to_dict
+from mrslam_core.slam.config import FilterConfig
+from mrslam_core.slam.filter import MultiRobotFastSLAM
+from mrslam_core.slam.landmarks import LandmarkStore
+from mrslam_core.slam.models import ObservationModel
+
+FORMAT = "mrslam-filter-checkpoint"
+FORMAT_VERSION = 1
+
+#: Filter arrays saved as ``filter.<name>``.
+FILTER_ARRAYS = ("poses", "log_w", "score")
+#: Landmark store arrays saved as ``store.<name>``. The chunk pool (``refcount`` and
+#: ``pool_*``) is saved up to its last chunk in use: chunk ids stay the same after a reload, and
+#: free chunks hold nothing that is ever read (a chunk is overwritten whenever it is taken).
+POOL_ARRAYS = ("refcount", "pool_mean", "pool_cov", "pool_exists", "pool_count", "pool_score")
+STORE_ARRAYS = ("table",) + POOL_ARRAYS + ("descriptor", "ref", "origin")
+#: Filter attributes saved or rebuilt one by one. Every other attribute of the filter (its
+#: counters, flags and per-robot arrays) is saved by type (see :func:`_other_state`): scalars in
+#: the header's ``attributes``, arrays as ``attr.<name>``, ``{int: array}`` dicts as
+#: ``dict.<name>.keys``/``.values``; an attribute of another type makes saving fail loudly.
+FILTER_ATTRIBUTES = frozenset(
+    FILTER_ARRAYS + ("config", "robots", "index", "model", "rng", "landmarks", "last_stamp", "dropped")
+)
+#: Store attributes restored or rebuilt (``_tree``/``_dtree`` and their live lists are caches,
+#: rebuilt lazily from ``ref`` and ``descriptor``).
+STORE_ATTRIBUTES = frozenset(
+    STORE_ARRAYS + ("dim", "chunk", "descriptor_dim", "size", "_tree", "_live", "_dtree", "_dlive")
+)
+
+
+class CheckpointError(ValueError):
+    """A checkpoint file that cannot be written or read (wrong format, version or content)."""
+
+
+def _json_default(value: Any) -> Any:
+    if isinstance(value, np.integer):
+        return int(value)
+    if isinstance(value, np.floating):
+        return float(value)
+    if isinstance(value, np.bool_):
+        return bool(value)
+    raise TypeError(f"{type(value).__name__} is not JSON serialisable")
+
+
+def save_checkpoint(filter: MultiRobotFastSLAM, path: str | Path, extra: dict[str, Any] | None = None) -> Path:
+    """Write the filter's complete state to ``path`` atomically.
+
+    Args:
+        filter: the filter to save (not modified).
+        path: target file; the ``.npz`` format is used whatever the suffix.
+        extra: caller's values stored beside the filter (e.g. a node's wall time or its robots'
+            last odometry). Values that are numpy arrays of a numeric or bool dtype are stored
+            as arrays ``extra.<key>``; every other value must be JSON serialisable.
+
+    Returns:
+        the path written.
+
+    Raises:
+        CheckpointError: ``extra`` holds something that cannot be stored without pickle.
+    """
+    path = Path(path)
+    store = filter.landmarks
+    arrays: dict[str, np.ndarray] = {}
+    for name in FILTER_ARRAYS:
+        arrays[f"filter.{name}"] = np.asarray(getattr(filter, name))
+    used = np.flatnonzero(store.refcount > 0)
+    pool = int(used[-1]) + 1 if used.size else 0
+    for name in STORE_ARRAYS:
+        value = np.asarray(getattr(store, name))
+        arrays[f"store.{name}"] = value[:pool] if name in POOL_ARRAYS else value
+    attributes = _other_state(filter, arrays)
+    extra_json: dict[str, Any] = {}
+    for key, value in (extra or {}).items():
+        if not isinstance(key, str):
+            raise CheckpointError(f"extra keys must be strings, got {key!r}")
+        if isinstance(value, np.ndarray):
+            if value.dtype.kind not in "biuf":
+                raise CheckpointError(f"extra[{key!r}]: arrays of dtype {value.dtype} need pickle")
+            arrays[f"extra.{key}"] = value
+        else:
+            extra_json[key] = value
+    header = {
+        "format": FORMAT,
+        "version": FORMAT_VERSION,
+        "written_unix_s": time.time(),
+        "config": to_dict(filter.config),
+        "model": filter.model.name,
+        "robots": list(filter.robots),
+        "last_stamp_ns": {name: int(t) for name, t in filter.last_stamp.items()},
+        "dropped": {str(k): int(v) for k, v in filter.dropped.items()},
+        "attributes": attributes,
+        "rng": filter.rng.bit_generator.state,
+        "store": {"dim": int(store.dim), "chunk": int(store.chunk),
+                  "descriptor_dim": int(store.descriptor_dim), "size": int(store.size)},
+        "extra": extra_json,
+        "extra_arrays": sorted(k[len("extra."):] for k in arrays if k.startswith("extra.")),
+    }
+    try:
+        text = json.dumps(header, default=_json_default, allow_nan=True)
+    except (TypeError, ValueError) as exc:
+        raise CheckpointError(f"checkpoint header is not JSON serialisable: {exc}") from exc
+    arrays["header"] = np.frombuffer(text.encode("utf-8"), np.uint8)
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            np.savez(fh, **arrays)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    try:  # make the rename itself durable
+        dfd = os.open(path.parent, os.O_RDONLY)
+        try:
+            os.fsync(dfd)
+        finally:
+            os.close(dfd)
+    except OSError:
+        pass
+    return path
+
+
+_READ_ERRORS = (OSError, ValueError, EOFError, zipfile.BadZipFile)
+
+
+def _other_state(filter: MultiRobotFastSLAM, arrays: dict[str, np.ndarray]) -> dict[str, Any]:
+    """Save every filter attribute not in FILTER_ATTRIBUTES by its type; returns the scalars.
+
+    Raises:
+        CheckpointError: an attribute of a type this format cannot hold without pickle.
+    """
+    scalars: dict[str, Any] = {}
+    for name, value in vars(filter).items():
+        if name in FILTER_ATTRIBUTES:
+            continue
+        if value is None or isinstance(value, (bool, int, float, str, np.number, np.bool_)):
+            scalars[name] = value.item() if isinstance(value, (np.number, np.bool_)) else value
+        elif isinstance(value, np.ndarray) and value.dtype.kind in "biuf":
+            arrays[f"attr.{name}"] = value
+        elif isinstance(value, dict) and all(isinstance(k, (int, np.integer)) for k in value) and all(
+            isinstance(v, np.ndarray) and v.dtype.kind in "biuf" for v in value.values()
+        ) and len({v.shape for v in value.values()}) <= 1:
+            keys = sorted(value)
+            arrays[f"dict.{name}.keys"] = np.array(keys, np.int64)
+            arrays[f"dict.{name}.values"] = (
+                np.stack([value[k] for k in keys]) if keys else np.zeros((0,))
+            )
+        else:
+            raise CheckpointError(
+                f"filter attribute {name!r} ({type(value).__name__}) has no checkpoint form; "
+                "teach mrslam_core/slam/checkpoint.py to save it"
+            )
+    return scalars
+
+
+def _restore_other_state(path, slam: MultiRobotFastSLAM, scalars: dict[str, Any], arrays) -> None:
+    """Set the attributes :func:`_other_state` saved (those the loading filter still has)."""
+    known = set(vars(slam))
+    for name, value in scalars.items():
+        if name in known:
+            setattr(slam, name, value)
+    for key, value in arrays.items():
+        if key.startswith("attr.") and key[5:] in known:
+            setattr(slam, key[5:], np.array(value))
+        elif key.startswith("dict.") and key.endswith(".keys") and key[5:-5] in known:
+            name = key[5:-5]
+            values = arrays.get(f"dict.{name}.values")
+            if values is None or (value.size and values.shape[0] != value.size):
+                raise CheckpointError(f"{path}: dict.{name}: keys and values do not match")
+            setattr(slam, name, {int(k): np.array(v) for k, v in zip(value, values)})
+
+
+def read_header(path: str | Path) -> dict[str, Any]:
+    """The JSON header of a checkpoint (format, version, config, robots, counters, extra)."""
+    return _read(path)[0]
+
+
+def _read(path: str | Path) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+    """(header, arrays) of a checkpoint file, every member read and checked to be numeric."""
+    try:
+        data = np.load(Path(path), allow_pickle=False)
+    except _READ_ERRORS as exc:
+        raise CheckpointError(f"{path}: not a readable .npz checkpoint: {exc}") from exc
+    if not isinstance(data, np.lib.npyio.NpzFile):
+        raise CheckpointError(f"{path}: a single .npy array, not an .npz checkpoint")
+    with data:
+        header = _header(data, path)
+        try:
+            arrays = {name: data[name] for name in data.files if name != "header"}
+        except _READ_ERRORS as exc:
+            raise CheckpointError(f"{path}: damaged member: {exc}") from exc
+    return header, arrays
+
+
+def _header(data, path) -> dict[str, Any]:
+    if "header" not in data.files:
+        raise CheckpointError(f"{path}: no header member; not an mrslam checkpoint")
+    try:
+        header = json.loads(data["header"].tobytes().decode("utf-8"))
+    except (*_READ_ERRORS, UnicodeDecodeError) as exc:
+        raise CheckpointError(f"{path}: header is not valid JSON: {exc}") from exc
+    if not isinstance(header, dict) or header.get("format") != FORMAT:
+        raise CheckpointError(f"{path}: not an mrslam filter checkpoint")
+    if header.get("version") != FORMAT_VERSION:
+        raise CheckpointError(
+            f"{path}: checkpoint format version {header.get('version')!r}, this mrslam reads {FORMAT_VERSION}"
+        )
+    return header
+
+
+def load_checkpoint(
+    path: str | Path, model: ObservationModel | None = None
+) -> tuple[MultiRobotFastSLAM, dict[str, Any]]:
+    """Rebuild the filter a checkpoint was written from.
+
+    Args:
+        path: a file written by :func:`save_checkpoint`.
+        model: the observation model, when the saved filter used one that is not the config's
+            ``observation_model`` (its name must match the saved one).
+
+    Returns:
+        (filter, extra): the filter, in exactly the saved state, and the ``extra`` values passed
+        to :func:`save_checkpoint` (arrays as numpy arrays).
+
+    Raises:
+        CheckpointError: not a checkpoint, another format version, or inconsistent content.
+    """
+    header, arrays = _read(path)
+    try:
+        config = from_dict(FilterConfig, header["config"])
+    except ConfigError as exc:
+        raise CheckpointError(f"{path}: saved config: {exc}") from exc
+    except KeyError as exc:
+        raise CheckpointError(f"{path}: header lacks {exc}") from exc
+    try:
+        return _rebuild(path, header, arrays, config, model)
+    except KeyError as exc:
+        raise CheckpointError(f"{path}: missing {exc}") from exc
+    except (TypeError, ValueError, IndexError, AttributeError) as exc:
+        if isinstance(exc, CheckpointError):
+            raise
+        raise CheckpointError(f"{path}: {exc}") from exc
+
+
+def _rebuild(path, header, arrays, config, model) -> tuple[MultiRobotFastSLAM, dict[str, Any]]:
+    robots = [str(r) for r in header["robots"]]
+    k, m = len(robots), config.num_particles
+    if model is not None and model.name != header["model"]:
+        raise CheckpointError(f"{path}: saved with model {header['model']!r}, given {model.name!r}")
+    if model is None and header["model"] != config.observation_model:
+        raise CheckpointError(
+            f"{path}: saved with model {header['model']!r} (not the config's); pass model="
+        )
+    expect = {"filter.poses": ((m, k, 3), "f"), "filter.log_w": ((m,), "f"), "filter.score": ((m,), "f")}
+    for name, (shape, kind) in expect.items():
+        a = arrays[name]
+        if a.shape != shape or a.dtype.kind != kind:
+            raise CheckpointError(f"{path}: {name} is {a.dtype}{a.shape}, expected float {shape}")
+    slam = MultiRobotFastSLAM(config, robots, np.zeros((k, 3)), model)
+    for name in FILTER_ARRAYS:
+        setattr(slam, name, np.array(arrays[f"filter.{name}"]))
+    slam.last_stamp = {str(r): int(t) for r, t in header["last_stamp_ns"].items()}
+    slam.dropped = Counter({str(r): int(n) for r, n in header["dropped"].items()})
+    _restore_other_state(path, slam, header["attributes"], arrays)
+    state = header["rng"]
+    bit_gen = getattr(np.random, str(state["bit_generator"]), None)
+    if not (isinstance(bit_gen, type) and issubclass(bit_gen, np.random.BitGenerator)):
+        raise CheckpointError(f"{path}: unknown bit generator {state['bit_generator']!r}")
+    gen = bit_gen()
+    gen.state = state
+    slam.rng = np.random.Generator(gen)
+    slam.landmarks = _rebuild_store(path, header["store"], arrays, m)
+    extra = dict(header["extra"])
+    for key in header["extra_arrays"]:
+        extra[key] = np.array(arrays[f"extra.{key}"])
+    return slam, extra
+
+
+def _rebuild_store(path, meta: dict[str, Any], arrays: dict[str, np.ndarray], m: int) -> LandmarkStore:
+    dim, chunk = int(meta["dim"]), int(meta["chunk"])
+    store = LandmarkStore(m, dim, int(meta["descriptor_dim"]), 1, chunk)
+    for name in STORE_ARRAYS:
+        setattr(store, name, np.array(arrays[f"store.{name}"]))
+    store.size = int(meta["size"])
+    pool = store.refcount.shape[0]
+    cap = store.descriptor.shape[0]
+    checks = [
+        (store.table.ndim == 2 and store.table.shape[0] == m, "table rows != particles"),
+        (store.table.size == 0 or (0 <= store.table.min() and store.table.max() < pool), "table names a chunk outside the pool"),
+        (store.table.shape[1] * chunk >= store.size, "fewer chunk columns than slots"),
+        (store.pool_mean.shape == (pool, chunk, dim), "pool_mean shape"),
+        (store.pool_cov.shape == (pool, chunk, dim, dim), "pool_cov shape"),
+        (all(getattr(store, f"pool_{f}").shape == (pool, chunk) for f in ("exists", "count", "score")),
+         "pool exists/count/score shape"),
+        (store.descriptor.shape == (cap, store.descriptor_dim), "descriptor shape"),
+        (store.ref.shape == (cap, dim) and store.origin.shape == (cap,), "ref/origin shape"),
+        (0 <= store.size <= cap, "size exceeds capacity"),
+        (np.array_equal(np.bincount(store.table.ravel(), minlength=pool), store.refcount), "refcount != table"),
+    ]
+    for ok, what in checks:
+        if not ok:
+            raise CheckpointError(f"{path}: inconsistent landmark store: {what}")
+    return store
