@@ -2,7 +2,8 @@
 
 Subscribes, per robot listed in the config: ``/<robot>/odom`` (nav_msgs/Odometry, odom -> base_link)
 and ``/<robot>/observations`` (PointCloud2 from the frontend, base_link). The ordering, pairing with
-odometry and the filter live in :class:`mrslam_core.pipelines.central.CentralMapper`; this node
+odometry, the filter and the merging of robots with an unknown start pose (``unknown_start``) live
+in :class:`mrslam_core.pipelines.central.CentralMapper`; this node
 converts and publishes: ``/<robot>/pose`` (PoseWithCovarianceStamped, map), ``/<robot>/path``,
 map -> ``<robot>/odom`` on /tf after every update of that robot, and on a timer the best
 particle's landmarks (``/slam/landmarks`` PointCloud2 and ``/slam/landmark_markers`` ellipsoids),
@@ -127,6 +128,7 @@ class SlamNode(Node):
                                      callback_group=inputs)
         self.unknown: set[str] = set()
         self.latency_ms: deque[float] = deque(maxlen=100_000)
+        self._merges_logged = 0
         self.create_timer(self.cfg.map_period, self.on_timer)
         self.create_timer(self.cfg.process_period, self.on_process, clock=Clock(clock_type=ClockType.STEADY_TIME))
         if self.cfg.checkpoint:
@@ -188,7 +190,18 @@ class SlamNode(Node):
                 return
             d = done[0]
             self.latency_ms.append((self.get_clock().now().nanoseconds - d.stamp_ns) * 1e-6)
-            self.publish(d.robot, d.stamp_ns, d.pose, d.cov, d.odom)
+            self._log_merges()
+            if d.merged:  # an unknown-start robot has no map pose (nor map -> odom) before it merges
+                self.publish(d.robot, d.stamp_ns, d.pose, d.cov, d.odom)
+
+    def _log_merges(self) -> None:
+        for m in self.mapper.merges[self._merges_logged:]:
+            if m["accepted"]:
+                self.get_logger().info(f"{m['robot']} merged into the map: transform {m['transform']}, "
+                                       f"{m['inliers']} inliers, rmse {m['rmse_m']:.3f} m")
+            else:
+                self.get_logger().info(f"{m['robot']} not merged yet: {m['reason']}", throttle_duration_sec=10.0)
+        self._merges_logged = len(self.mapper.merges)
 
     def on_timer(self) -> None:
         self._look_for_unknown_robots()
@@ -250,6 +263,8 @@ class SlamNode(Node):
             "landmarks": int(len(mean)),
             "dropped": drops,
             "queued_at_end": self.mapper.queued,
+            "merges": self.mapper.merges,
+            "unmerged": sorted(self.mapper.local),
         }
         (out / "slam.json").write_text(json.dumps(stats, indent=1))
 

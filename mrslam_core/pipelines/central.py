@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from mrslam_core.evaluation.metrics import interpolate_poses
+from mrslam_core.fusion.config import FusionConfig
 from mrslam_core.geometry.se2 import between
 from mrslam_core.slam.config import FilterConfig
 from mrslam_core.slam.filter import FilterInputError, MultiRobotFastSLAM, RobotUpdate
@@ -41,7 +42,11 @@ class CentralConfig:
         odom_buffer: odometry poses kept per robot for interpolation.
         max_wait: longest a set waits for the other robots' sets of the same time [s].
         max_queue: observation sets held at most; beyond it the oldest is dropped and counted.
-        filter: the multi-robot filter.
+        unknown_start: robots whose start pose is unknown (their ``start_poses`` entries are not
+            used); if every robot is listed, the first one's start pose defines the map frame.
+        merge_every: updates of a robot with an unknown start between attempts to align its map.
+        filter: the multi-robot filter (and each unknown-start robot's local filter).
+        fusion: map alignment and joining of unknown-start robots.
     """
 
     robots: tuple[str, ...] = ("robot1",)
@@ -49,7 +54,10 @@ class CentralConfig:
     odom_buffer: int = 2000
     max_wait: float = 1.0
     max_queue: int = 200
+    unknown_start: tuple[str, ...] = ()
+    merge_every: int = 10
     filter: FilterConfig = field(default_factory=FilterConfig)
+    fusion: FusionConfig = field(default_factory=FusionConfig)
 
 
 @dataclass(frozen=True)
@@ -63,6 +71,8 @@ class Processed:
         cov: (3, 3) its covariance.
         odom: (3,) the robot's odometry pose at the stamp, odom frame.
         step_ms: wall time of the filter step [ms].
+        merged: the pose is in the map frame (False: an unknown-start robot not merged yet,
+            whose pose is in its own start frame).
     """
 
     robot: str
@@ -71,6 +81,7 @@ class Processed:
     cov: np.ndarray
     odom: np.ndarray
     step_ms: float
+    merged: bool = True
 
 
 class CentralMapper:
@@ -85,9 +96,21 @@ class CentralMapper:
         starts = np.asarray(cfg.start_poses, float)
         if starts.size != 3 * len(robots):
             raise ValueError(f"start_poses has {starts.size} numbers; {len(robots)} robots need {3 * len(robots)}")
+        unknown = [r for r in cfg.unknown_start if r in robots]
+        if set(cfg.unknown_start) - set(robots):
+            raise ValueError(f"unknown_start names robots not in robots: {sorted(set(cfg.unknown_start) - set(robots))}")
+        if len(unknown) == len(robots):
+            unknown = unknown[1:]  # the first robot anchors the map frame
         self.cfg = cfg
         self.robots = robots
-        self.slam = MultiRobotFastSLAM(cfg.filter, robots, starts.reshape(len(robots), 3))
+        known = [r for r in robots if r not in unknown]
+        starts = starts.reshape(len(robots), 3)
+        self.slam = MultiRobotFastSLAM(cfg.filter, known, starts[[robots.index(r) for r in known]])
+        #: unknown-start robots not merged yet: their local filters (K = 1, own start frame)
+        self.local = {r: MultiRobotFastSLAM(cfg.filter, [r], np.zeros((1, 3))) for r in unknown}
+        self._local_updates: Counter[str] = Counter()
+        #: every alignment attempt: robot, stamp_ns, accepted, reason, inliers, rmse_m, transform
+        self.merges: list[dict] = []
         self.drops: Counter[str] = Counter()
         self.update_ms: list[float] = []
         self.trajectory: dict[str, list[tuple[int, np.ndarray]]] = {r: [] for r in robots}
@@ -196,19 +219,42 @@ class CentralMapper:
         prev = self._last.get(obs.robot)
         # the first update moves the robot from where its odometry started (at its start pose)
         reference = buf[0][1] if prev is None else prev[1]
+        filt = self.local.get(obs.robot, self.slam)
         t0 = time.perf_counter()
         try:
-            self.slam.step([RobotUpdate(obs.robot, obs.stamp_ns, between(reference, odom), obs)])
+            filt.step([RobotUpdate(obs.robot, obs.stamp_ns, between(reference, odom), obs)])
         except FilterInputError:
             self.drops["bad_observations"] += 1
             return None
         ms = (time.perf_counter() - t0) * 1e3
         self.update_ms.append(ms)
         self._last[obs.robot] = (obs.stamp_ns, odom)
-        est = self.slam.estimate()
-        k = self.slam.index[obs.robot]
-        self.trajectory[obs.robot].append((obs.stamp_ns, est.mean[k].copy()))
-        return Processed(obs.robot, obs.stamp_ns, est.mean[k].copy(), est.cov[k].copy(), odom, ms)
+        if filt is not self.slam:
+            self._local_updates[obs.robot] += 1
+            if self._local_updates[obs.robot] % self.cfg.merge_every == 0:
+                self._try_merge(obs.robot, obs.stamp_ns)
+            filt = self.local.get(obs.robot, self.slam)
+        est = filt.estimate()
+        k = filt.index[obs.robot]
+        merged = filt is self.slam
+        if merged:
+            self.trajectory[obs.robot].append((obs.stamp_ns, est.mean[k].copy()))
+        return Processed(obs.robot, obs.stamp_ns, est.mean[k].copy(), est.cov[k].copy(), odom, ms, merged)
+
+    def _try_merge(self, robot: str, stamp_ns: int) -> None:
+        from mrslam_core.fusion.join import try_join
+        from mrslam_core.fusion.maps import FusionError
+
+        try:
+            al, joined = try_join(self.slam, self.local[robot], self.cfg.fusion, robot)
+        except FusionError as exc:
+            self.merges.append({"robot": robot, "stamp_ns": stamp_ns, "accepted": False, "reason": str(exc)})
+            return
+        self.merges.append({"robot": robot, "stamp_ns": stamp_ns, "accepted": joined is not None,
+                            "reason": al.reason, "inliers": int(len(al.inlier_pairs)), "rmse_m": float(al.rmse),
+                            "transform": [float(v) for v in al.transform]})
+        if joined is not None:
+            del self.local[robot]
 
     # ------------------------------------------------------------------ results
     def trajectories(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
@@ -223,7 +269,9 @@ class CentralMapper:
     # ------------------------------------------------------------------ checkpoints
     def save(self, path: str | Path) -> Path:
         """Write the filter and the mapper's own state (odometry buffers, queue, last updates,
-        trajectories, counters) atomically to ``path`` (see :mod:`mrslam_core.slam.checkpoint`)."""
+        trajectories, counters) atomically to ``path`` (see :mod:`mrslam_core.slam.checkpoint`).
+        Local filters of unknown-start robots not merged yet are not saved: after a resume those
+        robots start their own maps again."""
         from mrslam_core.slam.checkpoint import save_checkpoint
 
         extra: dict = {"mapper": {
@@ -258,6 +306,8 @@ class CentralMapper:
             raise CheckpointError(f"{path}: saved for robots {state and state.get('robots')}, not {list(cfg.robots)}")
         mapper = cls(cfg)
         mapper.slam = slam
+        for r in [r for r in mapper.local if r in slam.index]:
+            del mapper.local[r]  # merged before the checkpoint (unmerged robots restart mapping)
         mapper._last = {r: (int(v[0]), np.array(v[1:], float)) for r, v in state["last"].items()}
         mapper._latest_obs = {r: int(v) for r, v in state["latest_obs"].items()}
         mapper._first_ns = state["first_ns"]
@@ -277,4 +327,6 @@ class CentralMapper:
         """Drops of the mapper and of the filter, by reason."""
         out = Counter(self.drops)
         out.update({f"filter_{k}": v for k, v in self.slam.dropped.items()})
+        for local in self.local.values():
+            out.update({f"filter_{k}": v for k, v in local.dropped.items()})
         return dict(out)

@@ -189,3 +189,36 @@ def test_resume_refuses_a_checkpoint_of_other_robots(tmp_path):
     a.save(tmp_path / "ckpt.npz")
     with pytest.raises(CheckpointError, match="robots"):
         CentralMapper.resume(_cfg(robots=("robot1", "robot3")), tmp_path / "ckpt.npz")
+
+
+def test_a_robot_with_an_unknown_start_is_merged_and_then_localised_in_the_map():
+    from mrslam_core.datasets.synthetic import SyntheticWorld, SyntheticWorldConfig
+    from mrslam_core.fusion.config import FusionConfig
+
+    world = SyntheticWorld(SyntheticWorldConfig(num_robots=2, seed=5))
+    starts = world.start_poses()
+    cfg = CentralConfig(robots=("robot1", "robot2"), start_poses=(*starts[0], 9.0, 9.0, 9.0),  # robot2's: not used
+                        unknown_start=("robot2",), merge_every=5,
+                        filter=FilterConfig(num_particles=50, seed=2), fusion=FusionConfig(min_inliers=5))
+    m = CentralMapper(cfg)
+    odom = {r: np.zeros(3) for r in world.robots}
+    for r in world.robots:
+        m.add_odometry(r, 0, odom[r])
+    truth = {}
+    merged_at = None
+    for i, (_, true, _, updates) in enumerate(world.run(80)):
+        for k, u in enumerate(updates):
+            odom[u.robot] = compose(odom[u.robot], u.odometry)
+            m.add_odometry(u.robot, u.stamp_ns, odom[u.robot])
+            truth[(u.robot, u.stamp_ns)] = true[k]
+            m.add_observations(u.observations)
+        for d in m.process():
+            if d.robot == "robot2" and d.merged and merged_at is None:
+                merged_at = i
+    assert "robot2" not in m.local and merged_at is not None, m.merges[-3:]
+    assert m.merges[-1]["accepted"] and not any(x["accepted"] for x in m.merges[:-1])
+    t, poses = m.trajectories()["robot2"]
+    assert len(t) >= 80 - merged_at - 2
+    err = [np.linalg.norm(p[:2] - truth[("robot2", s)][:2]) for s, p in zip(t, poses)]
+    assert np.sqrt(np.mean(np.square(err))) < 0.3, err
+    assert m.trajectories()["robot1"][0].size >= 79

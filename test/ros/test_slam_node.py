@@ -77,3 +77,141 @@ def test_slam_node_tracks_two_robots():
         assert slam.mapper.slam.landmarks.size > 50  # one shared map
     finally:
         rclpy.shutdown()
+
+
+def test_a_robot_with_an_unknown_start_gets_map_poses_only_once_merged():
+    import rclpy
+    from geometry_msgs.msg import PoseWithCovarianceStamped
+    from nav_msgs.msg import Odometry
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.parameter import Parameter
+    from sensor_msgs.msg import PointCloud2
+    from tf2_msgs.msg import TFMessage
+
+    from mrslam_core.datasets.synthetic import SyntheticWorld, SyntheticWorldConfig
+    from mrslam_core.geometry.se2 import compose
+    from mrslam_ros.conversions import msg_to_pose, ns_to_stamp, observations_to_cloud, pose_to_msg
+    from mrslam_ros.slam_node import SlamNode
+
+    world = SyntheticWorld(SyntheticWorldConfig(num_robots=2, seed=5))
+    starts = world.start_poses()
+    rclpy.init()
+    try:
+        slam = SlamNode(parameter_overrides=[
+            Parameter("robots", value=list(world.robots)),
+            Parameter("start_poses", value=[*starts[0].tolist(), 0.0, 0.0, 0.0]),
+            Parameter("unknown_start", value=["robot2"]),
+            Parameter("merge_every", value=5),
+            Parameter("fusion.min_inliers", value=5),
+            Parameter("filter.num_particles", value=50),
+            Parameter("filter.seed", value=2),
+        ])
+        feeder = rclpy.create_node("feeder")
+        odom_pub = {r: feeder.create_publisher(Odometry, f"/{r}/odom", 100) for r in world.robots}
+        obs_pub = {r: feeder.create_publisher(PointCloud2, f"/{r}/observations", 20) for r in world.robots}
+        poses, tf_children = [], set()
+        feeder.create_subscription(PoseWithCovarianceStamped, "/robot2/pose", poses.append, 100)
+        feeder.create_subscription(TFMessage, "/tf", lambda m: tf_children.update(t.child_frame_id for t in m.transforms), 100)
+        ex = SingleThreadedExecutor()
+        ex.add_node(slam)
+        ex.add_node(feeder)
+        end = time.time() + 10
+        while time.time() < end and feeder.count_subscribers("/robot2/observations") == 0:
+            ex.spin_once(timeout_sec=0.05)
+        odom = {r: np.zeros(3) for r in world.robots}
+        for r in world.robots:
+            m = Odometry()
+            m.pose.pose = pose_to_msg(odom[r])
+            odom_pub[r].publish(m)
+        truth, before_merge = {}, None
+        for i, (_, true, _, updates) in enumerate(world.run(80)):
+            for k, u in enumerate(updates):
+                odom[u.robot] = compose(odom[u.robot], u.odometry)
+                m = Odometry()
+                m.header.stamp = ns_to_stamp(u.stamp_ns)
+                m.pose.pose = pose_to_msg(odom[u.robot])
+                odom_pub[u.robot].publish(m)
+                truth[u.stamp_ns] = true[k] if u.robot == "robot2" else truth.get(u.stamp_ns)
+            for _ in range(3):
+                ex.spin_once(timeout_sec=0.01)
+            for u in updates:
+                obs_pub[u.robot].publish(observations_to_cloud(u.observations, f"{u.robot}/base_link"))
+            for _ in range(20):
+                ex.spin_once(timeout_sec=0.005)
+            if i == 50:
+                before_merge = (len(poses), "robot2/odom" in tf_children, list(slam.mapper.local))
+        end = time.time() + 10
+        while time.time() < end and slam.mapper.queued:
+            ex.spin_once(timeout_sec=0.05)
+        for _ in range(50):
+            ex.spin_once(timeout_sec=0.01)
+        merged = [m for m in slam.mapper.merges if m["accepted"]]
+        assert len(merged) == 1 and not slam.mapper.local
+        assert before_merge == (0, False, ["robot2"])  # nothing published in the map before
+        assert len(poses) >= 10 and "robot2/odom" in tf_children
+        last = poses[-1]
+        stamp = last.header.stamp.sec * 1_000_000_000 + last.header.stamp.nanosec
+        assert np.linalg.norm(msg_to_pose(last.pose.pose)[:2] - truth[stamp][:2]) < 0.3
+    finally:
+        rclpy.shutdown()
+
+
+def test_bad_input_is_counted_on_diagnostics_and_the_node_keeps_running():
+    import rclpy
+    from diagnostic_msgs.msg import DiagnosticArray
+    from nav_msgs.msg import Odometry
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.parameter import Parameter
+    from sensor_msgs.msg import PointCloud2
+
+    from mrslam_core.types import ObservationSet
+    from mrslam_ros.conversions import diagnostics_to_counters, ns_to_stamp, observations_to_cloud, pose_to_msg
+    from mrslam_ros.slam_node import SlamNode
+
+    rclpy.init()
+    try:
+        slam = SlamNode(parameter_overrides=[Parameter("robots", value=["robot1"]), Parameter("map_period", value=0.2),
+                                             Parameter("filter.num_particles", value=20)])
+        feeder = rclpy.create_node("feeder")
+        odom = feeder.create_publisher(Odometry, "/robot1/odom", 10)
+        obs = feeder.create_publisher(PointCloud2, "/robot1/observations", 10)
+        stranger = feeder.create_publisher(PointCloud2, "/robot9/observations", 10)
+        diags = []
+        feeder.create_subscription(DiagnosticArray, "/diagnostics", diags.append, 10)
+        ex = SingleThreadedExecutor()
+        ex.add_node(slam)
+        ex.add_node(feeder)
+
+        def spin(n=20):
+            for _ in range(n):
+                ex.spin_once(timeout_sec=0.01)
+
+        end = time.time() + 10
+        while time.time() < end and feeder.count_subscribers("/robot1/observations") == 0:
+            spin(1)
+        for t in (0, 10**9, 10**9, 5 * 10**8):  # a duplicate and a backwards stamp
+            m = Odometry()
+            m.header.stamp = ns_to_stamp(t)
+            m.pose.pose = pose_to_msg(np.array([t * 1e-9, 0.0, 0.0]))
+            odom.publish(m)
+            spin(3)
+        good = ObservationSet("robot1", 5 * 10**8, np.array([[2.0, 0.0, 0.5]]), np.eye(3)[None] * 0.01)
+        obs.publish(observations_to_cloud(good, "robot1/base_link"))
+        obs.publish(observations_to_cloud(good, "robot1/base_link"))  # duplicate stamp
+        obs.publish(observations_to_cloud(good, "robot7/camera"))  # wrong frame
+        broken = observations_to_cloud(good, "robot1/base_link")
+        broken.data = broken.data[:10]  # truncated
+        obs.publish(broken)
+        stranger.publish(observations_to_cloud(good, "robot9/base_link"))
+        end = time.time() + 5
+        while time.time() < end:
+            spin(5)
+        counters = {}
+        for d in diags:
+            counters.update(diagnostics_to_counters(d).get("/slam", {}))
+        for reason in ("odometry_duplicate_stamp", "odometry_out_of_order", "wrong_frame", "bad_cloud", "unknown_robot"):
+            assert counters.get(f"drops.{reason}", 0) >= 1, (reason, counters)
+        assert counters.get("drops.duplicate_stamp", 0) + counters.get("drops.stale_stamp", 0) >= 1, counters
+        assert counters["updates"] == 1  # the one good set went through
+    finally:
+        rclpy.shutdown()

@@ -1,0 +1,95 @@
+"""Every threshold of map alignment and fusion (the only place their defaults are written)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+
+@dataclass(frozen=True)
+class FusionConfig:
+    """Map alignment (004 section 3), multi-map consistency (3.1), fusion (4) and joining (5).
+
+    Attributes:
+        descriptor_threshold: E0, the largest squared Euclidean descriptor distance (000 eq. 16)
+            of a putative match.
+        mutual: keep only mutual nearest neighbours in descriptor space.
+        ransac_iterations: hypotheses drawn (each from 2 matches, the minimal set of a 2D rigid
+            transform).
+        inlier_distance: a match is an inlier when the transformed source landmark lies within
+            this planar distance of the target landmark [m].
+        min_inliers: fewest inliers for an alignment to be accepted.
+        max_residual: largest inlier RMSE (planar, after refinement) to accept [m].
+        min_spread: smallest RMS distance of the inliers from their centroid [m]; below it the
+            rotation is not determined (all inliers on one spot).
+        refine_iterations: least-squares refits on the inliers (the inlier set is recomputed
+            after each).
+        weighted: weight each pair in the refinement by 1 / (tr Σ_target,xy + tr Σ_source,xy).
+        seed: seed of the RANSAC sampler.
+        loop_sigma_xy, loop_sigma_theta: standard deviation [m], [rad] of the prior that ties each
+            pairwise RANSAC transform to the multi-map solution (004 section 3.1, E1–E3).
+        landmark_sigma: standard deviation of a matched landmark residual [m] in the multi-map
+            least squares (004 E4…); None derives it per pair from the landmark covariances.
+        source_outliers: what happens to a source landmark whose descriptor matched a target
+            landmark but which is not a RANSAC inlier: ``keep`` adds it as a new landmark (visual
+            maps, where such a match is usually a wrong match between distinct places), ``drop``
+            discards it (identifying descriptors such as barcodes, where it is the same landmark
+            mapped badly).
+        pair_likelihood: when joining filters, give each joined particle (a drawn pair of a
+            central and a local particle) the weight of its matched landmarks agreeing once
+            moved by its transform, N(c₁ − c₂; 0, Σ₁ + Σ₂) over the pairs (004 section 5
+            resamples the B×B pairs "based on new observations"; this uses the shared landmarks
+            as that evidence); otherwise the joined particles start with equal weights.
+        pair_likelihood_temper: exponent (0..1] applied to that likelihood, so that a few very
+            confident landmarks cannot collapse the joined population onto one pair.
+        z_variance: variance [m²] given to z when a planar (2D) map is padded to 3D.
+        residual_variance_scale: when joining, the source landmarks' x and y variances grow by
+            (scale × the alignment's inlier RMSE)² to hold the transform's own uncertainty
+            (0: trust the transform exactly, as 004 does).
+        transform_sampling_scale: when joining, each particle draws its own transform from
+            N(T, (scale)²·Cov(T)), Cov(T) from the inliers' residuals (0: every particle uses T).
+        per_particle_alignment: when joining, refit the transform for each (central particle,
+            local particle) pair on its own copies of the inlier landmarks (004 section 5 fuses
+            particle by particle; one transform from the best maps fits only the best particle).
+    """
+
+    descriptor_threshold: float = 0.5
+    mutual: bool = True
+    ransac_iterations: int = 500
+    inlier_distance: float = 0.3
+    min_inliers: int = 6
+    max_residual: float = 0.2
+    min_spread: float = 0.5
+    refine_iterations: int = 3
+    weighted: bool = True
+    seed: int = 0
+    loop_sigma_xy: float = 0.2
+    loop_sigma_theta: float = 0.02
+    landmark_sigma: float | None = None
+    source_outliers: Literal["keep", "drop"] = "keep"
+    pair_likelihood: bool = False
+    pair_likelihood_temper: float = 1.0
+    z_variance: float = 1.0
+    residual_variance_scale: float = 0.0
+    transform_sampling_scale: float = 0.0
+    per_particle_alignment: bool = True
+
+    def __post_init__(self) -> None:
+        if self.ransac_iterations < 1 or self.refine_iterations < 0:
+            raise ValueError("ransac_iterations must be >= 1 and refine_iterations >= 0")
+        if self.min_inliers < 2:
+            raise ValueError("min_inliers must be >= 2 (a 2D rigid transform needs two points)")
+        if self.inlier_distance <= 0 or self.max_residual <= 0 or self.min_spread < 0:
+            raise ValueError("inlier_distance and max_residual must be > 0, min_spread >= 0")
+        if self.descriptor_threshold < 0:
+            raise ValueError("descriptor_threshold must be >= 0")
+        if self.loop_sigma_xy <= 0 or self.loop_sigma_theta <= 0:
+            raise ValueError("loop sigmas must be > 0")
+        if self.landmark_sigma is not None and self.landmark_sigma <= 0:
+            raise ValueError("landmark_sigma must be > 0 or None")
+        if not 0 < self.pair_likelihood_temper <= 1:
+            raise ValueError("pair_likelihood_temper must be in (0, 1]")
+        if self.residual_variance_scale < 0 or self.transform_sampling_scale < 0:
+            raise ValueError("residual_variance_scale and transform_sampling_scale must be >= 0")
+        if self.z_variance <= 0:
+            raise ValueError("z_variance must be > 0")

@@ -1,0 +1,248 @@
+"""Bringing a robot with its own local filter into the central filter (004 section 5).
+
+A robot whose start pose is unknown runs a local :class:`MultiRobotFastSLAM` with K = 1 from its own
+origin. Once its map aligns with the central map (transform T, local frame → common frame, and the
+inlier landmark pairs), the two filters are joined particle by particle: every particle i of the
+central filter is paired with every particle j of the local filter (M × L pairs, weighted w_i·w_j),
+M pairs are drawn by systematic resampling, and each drawn pair becomes one particle of the joint
+filter:
+
+- its transform: T, or (``per_particle_alignment``) T refitted by least squares on the pair's own
+  copies of the inlier landmarks, so the robot sits consistently in that central particle's map;
+- poses: the central particle's K robots plus the local particle's pose moved by its transform;
+- landmarks: the central particle's map; each matched landmark fused with the local particle's copy
+  by the stationary Kalman step (004 eqs. 4–6, corrected; covariance rotated R·Σ·Rᵀ); the local
+  particle's other landmarks moved and added as new landmarks;
+- weight: equal, or (``pair_likelihood``) the likelihood of the pair's matched landmarks agreeing.
+
+From then on the robot is one more robot of the joint filter. A robot that restarts (a new local
+filter for a name already in the central filter) goes through the same path; its pose column is
+replaced.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from mrslam_core.fusion.alignment import Alignment, ransac_align, rigid_transform_2d
+from mrslam_core.fusion.config import FusionConfig
+from mrslam_core.fusion.kalman import kalman_fuse
+from mrslam_core.fusion.maps import FusionError, LandmarkMap
+from mrslam_core.geometry.se2 import compose
+from mrslam_core.linalg import quad_form, sym_inv_det
+from mrslam_core.slam.filter import MultiRobotFastSLAM
+from mrslam_core.slam.resampling import normalise_log_weights
+
+LOG_2PI = float(np.log(2.0 * np.pi))
+
+
+@dataclass(frozen=True)
+class JoinResult:
+    """What joining a local filter into the central one did.
+
+    Attributes:
+        robot: name of the joined robot in the central filter.
+        transform: (3,) local frame → common frame (tx [m], ty [m], θ [rad]).
+        fused: matched landmarks (slot pairs) fused.
+        added: local landmarks added to the central map as new landmarks.
+        dropped: local landmarks left out (outlier matches with ``source_outliers = drop``).
+        ancestors: (M, 2) (central particle, local particle) behind each joined particle.
+        slot_map: (S_local,) central slot of each local slot (-1: not carried over).
+        transforms: (M, 3) the transform each joined particle used (``transform`` unless
+            refitted per pair or sampled).
+    """
+
+    robot: str
+    transform: np.ndarray
+    fused: int
+    added: int
+    dropped: int
+    ancestors: np.ndarray
+    slot_map: np.ndarray
+    transforms: np.ndarray
+
+
+def move_landmarks(
+    transform: np.ndarray, mean: np.ndarray, cov: np.ndarray, extra_variance: float = 0.0
+) -> tuple[np.ndarray, np.ndarray]:
+    """Landmarks moved by planar transforms (tx, ty, θ): p' = R·p + t, Σ' = R·Σ·Rᵀ (z and its
+    variance unchanged), plus ``extra_variance`` [m²] on x and y.
+
+    Args:
+        transform: (3,) one transform, or (M, 3) one per leading row of ``mean``.
+        mean: (M, P, dim) or (P, dim), dim 2 or 3 [m]; cov: (..., dim, dim) [m²].
+    """
+    dim = mean.shape[-1]
+    t = np.asarray(transform, float)
+    c, s = np.cos(t[..., 2]), np.sin(t[..., 2])
+    r = np.broadcast_to(np.eye(dim), t.shape[:-1] + (dim, dim)).copy()
+    r[..., 0, 0], r[..., 0, 1], r[..., 1, 0], r[..., 1, 1] = c, -s, s, c
+    off = np.zeros(t.shape[:-1] + (dim,))
+    off[..., :2] = t[..., :2]
+    if t.ndim == 2:  # one transform per particle row: broadcast over the P landmarks
+        r, off = r[:, None], off[:, None]
+    add = np.zeros((dim, dim))
+    add[0, 0] = add[1, 1] = extra_variance
+    moved = (r @ mean[..., None])[..., 0] + off
+    return moved, r @ cov @ np.swapaxes(r, -1, -2) + add
+
+
+def systematic_draw(log_w: np.ndarray, n: int, rng: np.random.Generator) -> np.ndarray:
+    """``n`` indices drawn from normalised log weights (P,) by systematic (low-variance)
+    resampling, sorted (n may differ from P: here M of the M × L pairs)."""
+    cdf = np.cumsum(np.exp(log_w))
+    cdf[-1] = 1.0
+    u = (rng.random() + np.arange(n)) / n
+    return np.searchsorted(cdf, u, side="right").clip(0, log_w.size - 1)
+
+
+def join_filters(
+    central: MultiRobotFastSLAM,
+    local: MultiRobotFastSLAM,
+    transform: np.ndarray,
+    pairs: np.ndarray,
+    config: FusionConfig,
+    robot: str | None = None,
+    drop: np.ndarray | None = None,
+    extra_variance: float = 0.0,
+    transform_cov: np.ndarray | None = None,
+    per_pair: bool = False,
+) -> JoinResult:
+    """Join ``local`` (K = 1) into ``central`` particle by particle (004 section 5).
+
+    Args:
+        central: the common filter (M particles); modified in place.
+        local: the robot's own filter in its own frame; read only.
+        transform: (3,) local frame → central map frame.
+        pairs: (P, 2) (central slot, local slot) of landmarks known to be the same (the
+            alignment's inliers).
+        config: ``pair_likelihood``, ``pair_likelihood_temper``.
+        robot: the robot's name in the central filter (default: the local filter's robot).
+        drop: local slots not to carry over.
+        extra_variance: variance [m²] added to x and y of every local landmark moved into the
+            common frame: the uncertainty of the transform itself, which the local covariances
+            do not hold (so the fusion does not trust a misaligned local map over the central one).
+        transform_cov: (3, 3) covariance of ``transform``; when given, each joined particle
+            draws its own transform from N(transform, transform_cov) and moves its local
+            ancestor's pose and landmarks with it, so the joint filter can weigh alignments
+            (a single transform for all particles makes the merged robot overconfident).
+        per_pair: refit the transform for each drawn (central, local) pair by least squares on
+            the matched landmarks both particles hold (at least two; else ``transform``), so
+            that the robot is placed consistently with each central particle's own map.
+    """
+    t = np.asarray(transform, float)
+    if t.shape != (3,) or not np.isfinite(t).all():
+        raise FusionError(f"transform must be finite (3,), got {transform}")
+    cs_store, ls_store = central.landmarks, local.landmarks
+    if cs_store.dim != ls_store.dim:
+        raise FusionError(f"landmark dimensions differ: central {cs_store.dim}, local {ls_store.dim}")
+    pairs = np.asarray(pairs, np.int64).reshape(-1, 2)
+    name = robot or local.robots[0]
+    kl = local.index.get(name, 0)
+    m, n_l = central.num_particles, local.num_particles
+    cs, ls = pairs[:, 0], pairs[:, 1]
+
+    log_pair = central.log_w[:, None] + local.log_w[None, :]
+    draw = systematic_draw(normalise_log_weights(log_pair.ravel()), m, central.rng)
+    anc_c, anc_l = draw // n_l, draw % n_l
+
+    # per particle transform: refitted on the pair's own copies of the matched landmarks
+    # (each central particle's map may sit slightly differently), or one for all
+    t_all = np.broadcast_to(t, (m, 3)).copy()
+    if per_pair and len(pairs) >= 2:
+        mc, ec = cs_store.gather(anc_c[:, None], cs[None], ("mean", "exists"))
+        ml, el = ls_store.gather(anc_l[:, None], ls[None], ("mean", "exists"))
+        w = (ec & el).astype(float)
+        ok = w.sum(1) >= 2
+        if ok.any():
+            t_all[ok] = rigid_transform_2d(ml[ok, :, :2], mc[ok, :, :2], w[ok])
+    if transform_cov is not None and np.isfinite(transform_cov).all():
+        chol = np.linalg.cholesky(0.5 * (transform_cov + transform_cov.T) + 1e-12 * np.eye(3))
+        t_all += central.rng.standard_normal((m, 3)) @ chol.T
+    # the drawn pairs weighted by how well their matched landmarks agree once moved by their own
+    # transform (the "new observation" 004 section 5 resamples on), tempered
+    pair_ll = np.zeros(m)
+    if config.pair_likelihood and len(pairs):
+        mc, sc, ec = cs_store.gather(anc_c[:, None], cs[None], ("mean", "cov", "exists"))
+        ml, sl, el = ls_store.gather(anc_l[:, None], ls[None], ("mean", "cov", "exists"))
+        ml, sl = move_landmarks(t_all, ml.astype(float), sl.astype(float), extra_variance)
+        dim = ml.shape[-1]
+        inv, det = sym_inv_det(sc.astype(float) + sl)
+        ll = -0.5 * (quad_form(mc - ml, inv) + np.log(det) + dim * LOG_2PI)
+        pair_ll = config.pair_likelihood_temper * np.where(ec & el, ll, 0.0).sum(1)
+    # particles: central ancestors, then the robot's pose moved into the common frame
+    central.select_particles(anc_c, central.score[anc_c] + local.score[anc_l])
+    central.log_w = normalise_log_weights(pair_ll)
+    stamp = local.last_stamp.get(local.robots[kl])
+    central.add_robot(name, compose(t_all, local.poses[anc_l, kl]), stamp)
+
+    rows = np.arange(m)[:, None]
+    slot_map = np.full(ls_store.size, -1, np.int64)
+    if len(pairs):
+        mc, sc, ec, nc, scc = cs_store.gather(rows, cs[None], ("mean", "cov", "exists", "count", "score"))
+        ml, sl, el, nl, scl = ls_store.gather(anc_l[:, None], ls[None], ("mean", "cov", "exists", "count", "score"))
+        ml, sl = move_landmarks(t_all, ml.astype(float), sl.astype(float), extra_variance)
+        mc, sc = mc.astype(float), sc.astype(float)
+        both = ec & el
+        mean, cov = mc.copy(), sc.copy()
+        if both.any():
+            mean[both], cov[both] = kalman_fuse(mc[both], sc[both], ml[both], sl[both])
+        only_l = el & ~ec
+        mean[only_l], cov[only_l] = ml[only_l], sl[only_l]
+        count = np.where(both, nc + nl, np.where(only_l, nl, nc))
+        score = np.minimum(np.maximum(scc, scl), central.config.existence.max_score)
+        wi, wp = np.nonzero(el)
+        if wi.size:
+            cs_store.write(wi, cs[wp], mean=mean[wi, wp], cov=cov[wi, wp], exists=True,
+                           count=count[wi, wp], score=score[wi, wp])
+        n1 = np.where(ec, nc, 0).sum(0).astype(float)[:, None]
+        n2 = np.where(el, nl, 0).sum(0).astype(float)[:, None]
+        if cs_store.descriptor_dim and cs_store.descriptor_dim == ls_store.descriptor_dim:
+            d = (n1 * cs_store.descriptor[cs] + n2 * ls_store.descriptor[ls]) / np.maximum(n1 + n2, 1e-12)
+            cs_store.descriptor[cs] = np.where(n1 + n2 > 0, d, cs_store.descriptor[cs])
+        cs_store.refresh_reference(cs)
+        slot_map[ls] = cs
+
+    held = ls_store.exists_dense()[anc_l]  # (M, S_local)
+    rest = np.flatnonzero(held.any(axis=0))
+    skip = np.zeros(ls_store.size, bool)
+    skip[ls] = True
+    dropped = 0
+    if drop is not None and len(drop):
+        drop = np.asarray(drop, np.int64)
+        dropped = int(np.isin(rest, drop[~skip[drop]]).sum())
+        skip[drop] = True
+    rest = rest[~skip[rest]]
+    if rest.size:
+        mean, cov, ex, cnt = ls_store.gather(anc_l[:, None], rest[None])
+        mean, cov = move_landmarks(t_all, mean.astype(float), cov.astype(float), extra_variance)
+        slot_map[rest] = central.insert_landmarks(mean, cov, ex, ls_store.descriptor[rest], cnt)
+        cs_store.origin[slot_map[rest]] = ls_store.origin[rest]  # the creating track ids
+    return JoinResult(name, t.copy(), len(pairs), int(rest.size), dropped,
+                      np.column_stack([anc_c, anc_l]), slot_map, t_all)
+
+
+def try_join(
+    central: MultiRobotFastSLAM, local: MultiRobotFastSLAM, config: FusionConfig, robot: str | None = None
+) -> tuple[Alignment, JoinResult | None]:
+    """Align the local filter's best map to the central filter's best map and, if the alignment
+    is accepted, join the local filter into the central one.
+
+    Returns:
+        (the alignment — its ``reason`` says why nothing was joined —, the join or None).
+    """
+    target = LandmarkMap.from_filter(central, z_variance=config.z_variance)
+    source = LandmarkMap.from_filter(local, z_variance=config.z_variance)
+    al = ransac_align(target, source, config)
+    if not al.accepted:
+        return al, None
+    inl = al.inlier_pairs
+    pairs = np.column_stack([target.ids[inl[:, 0]], source.ids[inl[:, 1]]])
+    drop = source.ids[al.outlier_pairs[:, 1]] if config.source_outliers == "drop" else None
+    extra = (config.residual_variance_scale * al.rmse) ** 2
+    t_cov = al.cov * config.transform_sampling_scale**2 if config.transform_sampling_scale > 0 else None
+    return al, join_filters(
+        central, local, al.transform, pairs, config, robot, drop, extra, t_cov, config.per_particle_alignment
+    )
