@@ -45,7 +45,10 @@ class FrontendConfig:
         grid_rows: image grid rows.
         track_descriptor_gate: E0 for frame-to-frame tracking (squared distance of unit vectors).
         track_ratio: best/second-best descriptor distance ratio for tracking.
-        track_radius_px: largest image motion of a point between consecutive frames [px].
+        track_radius_px: largest image motion of a point between consecutive frames, around the
+            frame's common motion [px].
+        track_search_px: radius in which the frame's common image motion (a turning robot) is
+            looked for [px]; at most ``track_radius_px`` turns that search off.
         min_depth: points nearer than this along the optical axis are dropped [m].
         max_depth: points farther than this are dropped [m].
         obstacle_min_height: lower edge of the obstacle band in base_link z [m].
@@ -85,6 +88,7 @@ class FrontendConfig:
     track_descriptor_gate: float = 0.5
     track_ratio: float = 0.9
     track_radius_px: float = 60.0
+    track_search_px: float = 160.0
     min_depth: float = 0.2
     max_depth: float = 20.0
     obstacle_min_height: float = 0.05

@@ -21,6 +21,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from scipy.stats import chi2
+
 from mrslam_core.geometry.se2 import wrap_angle
 from mrslam_core.linalg import is_positive_definite, quad_form, sym_inv_det
 from mrslam_core.slam.association import associate_hungarian, associate_ml, resolve_conflicts
@@ -37,6 +39,11 @@ from mrslam_core.slam.resampling import (
 from mrslam_core.types import ObservationSet, RobotSighting
 
 LOG_2PI = float(np.log(2.0 * np.pi))
+#: Inputs beyond these bounds are dropped as implausible (found by fuzzing: larger finite values
+#: overflow the motion and EKF arithmetic or the float32 landmark store): |odometry| and
+#: |measurement| components [m or rad], and measurement/sighting variances [m², rad²].
+MAX_ABS_INPUT = 1e4
+VARIANCE_BOUNDS = (1e-12, 1e8)
 
 
 class FilterInputError(ValueError):
@@ -130,6 +137,14 @@ class MultiRobotFastSLAM:
         self.steps = 0
         self.resamples = 0
         self.removed_landmarks = 0
+        self.relocalizations = 0
+        #: per robot index: drift covariance D (3, 3) of its pose since its landmark
+        #: observations last constrained it (see RelocalizationConfig); missing = initial σ².
+        self.drift_cov: dict[int, np.ndarray] = {}
+        #: per robot index: motion noise (3, 3), map frame, accumulated but not yet sampled
+        #: (``defer_motion_noise``); missing = none.
+        self.pending_cov: dict[int, np.ndarray] = {}
+        self._noise_drawn = True
 
     # ------------------------------------------------------------------ public API
     @property
@@ -142,8 +157,12 @@ class MultiRobotFastSLAM:
         Updates that cannot be used (unknown robot, non-finite odometry, a stamp not later than
         the robot's previous one) are dropped and counted in :attr:`dropped`; the state is
         untouched by them. Observation rows with non-finite values or covariances that are not
-        positive definite are dropped and counted too.
+        positive definite are dropped and counted too, as are values beyond
+        :data:`MAX_ABS_INPUT` and variances outside :data:`VARIANCE_BOUNDS`. A batch with a
+        wrong measurement dimension or descriptor length raises FilterInputError before any
+        state changes.
         """
+        self._check_batch(updates)
         before = sum(self.dropped.values())
         associated = created = 0
         for upd in updates:
@@ -156,7 +175,23 @@ class MultiRobotFastSLAM:
             obs = upd.observations
             odo = np.asarray(upd.odometry, float)
             log_l = np.zeros(self.num_particles)
-            if self.config.proposal == "fastslam2" and obs is not None and len(obs):
+            if self.config.relocalization.enabled:
+                self._propagate_drift(k, odo, dt)
+            if self.config.defer_motion_noise:
+                self.poses[:, k], _ = predict_motion(self.poses[:, k], odo, self.config.motion, dt)
+                self.pending_cov[k] = self._propagate(self.pending_cov.get(k, np.zeros((3, 3))), k, odo, dt)
+                a = c = 0
+                if obs is not None and len(obs):
+                    if self.config.proposal == "fastslam2":
+                        self._noise_drawn = True
+                        p_x = np.broadcast_to(self.pending_cov[k], (self.num_particles, 3, 3)).copy()
+                        a, c = self._observe(k, obs, log_l, p_x)
+                        if self._noise_drawn:
+                            self.pending_cov.pop(k, None)
+                    else:
+                        self._draw_pending(k)
+                        a, c = self._observe(k, obs, log_l)
+            elif self.config.proposal == "fastslam2" and obs is not None and len(obs):
                 self.poses[:, k], p_x = predict_motion(self.poses[:, k], odo, self.config.motion, dt)
                 a, c = self._observe(k, obs, log_l, p_x)
             else:
@@ -196,6 +231,8 @@ class MultiRobotFastSLAM:
         dev = self.poses - mean[None]
         dev[..., 2] = wrap_angle(dev[..., 2])
         cov = np.einsum("m,mki,mkj->kij", w, dev, dev)
+        for k, pending in self.pending_cov.items():  # motion noise not yet drawn
+            cov[k] += pending
         return Estimate(best, self.poses[best].copy(), mean, cov)
 
     def best_map(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -206,12 +243,33 @@ class MultiRobotFastSLAM:
         return slots, mean, cov, desc, count
 
     # ------------------------------------------------------------------ internals
+    def _check_batch(self, updates: Sequence[RobotUpdate]) -> None:
+        """Raise FilterInputError for observations no update may start from (a measurement
+        dimension other than the model's, descriptor lengths that differ from the map's or
+        within the batch), before the step changes any state, so a failed step changes nothing."""
+        d_map = self.landmarks.descriptor_dim if self.landmarks.size else None
+        for upd in updates:
+            obs = upd.observations
+            if obs is None or upd.robot not in self.index or not len(obs):
+                continue
+            if obs.z.shape[1] != self.model.dim:
+                raise FilterInputError(
+                    f"{obs.robot}: observations have dimension {obs.z.shape[1]}, model "
+                    f"{self.model.name} needs {self.model.dim}"
+                )
+            d = obs.descriptors.shape[1]
+            if d_map is not None and d != d_map:
+                raise FilterInputError(
+                    f"{obs.robot}: descriptor length {d} differs from the map's {d_map}"
+                )
+            d_map = d
+
     def _accept(self, upd: RobotUpdate) -> bool:
         if upd.robot not in self.index:
             self.dropped["unknown_robot"] += 1
             return False
         odo = np.asarray(upd.odometry, dtype=float)
-        if odo.shape != (3,) or not np.isfinite(odo).all():
+        if odo.shape != (3,) or not np.isfinite(odo).all() or np.abs(odo).max() > MAX_ABS_INPUT:
             self.dropped["bad_odometry"] += 1
             return False
         last = self.last_stamp.get(upd.robot)
@@ -228,6 +286,9 @@ class MultiRobotFastSLAM:
                 f"{self.model.name} needs {dim}"
             )
         ok = np.isfinite(obs.z).all(axis=1) & is_positive_definite(obs.cov)
+        ok &= (np.abs(obs.z) <= MAX_ABS_INPUT).all(axis=1)
+        var = np.diagonal(obs.cov, axis1=1, axis2=2)
+        ok &= ((var >= VARIANCE_BOUNDS[0]) & (var <= VARIANCE_BOUNDS[1])).all(axis=1)
         ok &= np.isfinite(obs.descriptors).all(axis=1)
         if (~ok).any():
             self.dropped["bad_observation"] += int((~ok).sum())
@@ -334,9 +395,11 @@ class MultiRobotFastSLAM:
             conf = confirmed[mi, pv]
             mu_s, sig_s = mu[mi, pv], sig[mi, pv]
             if motion_cov is not None:
-                poses = self._sample_proposal(
+                poses, usable = self._sample_proposal(
                     k, mi[conf], z[bi[conf]], r[bi[conf]], mu_s[conf], sig_s[conf], motion_cov, log_l
                 )
+                if not usable:  # a lost robot's observations that cannot re-localise it
+                    return 0, 0
             new_mu, new_cov, d_sel, norm_sel = model.update(poses[mi], z[bi], r[bi], mu_s, sig_s)
             count, score = store.gather(mi, slots, ("count", "score"))
             store.write(
@@ -349,7 +412,7 @@ class MultiRobotFastSLAM:
                 log_l += np.bincount(mi[~conf], log_p0[bi[~conf]], m)
             store.set_reference(slots, new_mu)
         elif motion_cov is not None:
-            poses = self._sample_proposal(k, mi, z[:0], r[:0], z[:0], r[:0], motion_cov, log_l)
+            poses, _ = self._sample_proposal(k, mi, z[:0], r[:0], z[:0], r[:0], motion_cov, log_l)
         if self.config.existence.enabled:
             self._update_existence(poses, mean_pose, radius, mi, vslots[pair[mi, bi]] if mi.size else mi)
 
@@ -361,7 +424,7 @@ class MultiRobotFastSLAM:
     def _sample_proposal(
         self, k: int, mi: np.ndarray, z: np.ndarray, r: np.ndarray, mu: np.ndarray,
         sig: np.ndarray, motion_cov: np.ndarray, log_l: np.ndarray,
-    ) -> np.ndarray:
+    ) -> tuple[np.ndarray, bool]:
         """FastSLAM 2.0: draw robot k's pose from the Gaussian that folds in its associated
         observations, and add the joint marginal log likelihood of those observations.
 
@@ -371,40 +434,133 @@ class MultiRobotFastSLAM:
         measurements of one step folded in at once). The weight is the exact marginal
         N(ν; 0, HₓPHₓᵀ + blockdiag Z): by the determinant lemma and Woodbury,
         log|S| = Σ log|Z| + log|P| + log|Λ| and νᵀS⁻¹ν = Σ νᵀZ⁻¹ν − ηᵀΛ⁻¹η.
+        A robot whose observations are improbable in every particle is re-localised or its
+        observations set aside (see :class:`RelocalizationConfig`).
 
         Returns:
-            the new poses of robot k (M, 3), also written into ``self.poses``.
+            (the new poses of robot k (M, 3), also written into ``self.poses``; False when the
+            observations were set aside because the robot is lost and they cannot fix its pose).
         """
-        model = self.model
         m = self.num_particles
         x_hat = self.poses[:, k].copy()
-        lam, p_det = sym_inv_det(motion_cov)
-        lam = lam.copy()
-        eta = np.zeros((m, 3))
-        quad = np.zeros(m)
+        reloc = self.config.relocalization
+        mode, cov, ll, nis, info = self._fold(x_hat, mi, z, r, mu, sig, motion_cov, 1)
+        usable = True
         if mi.size:
-            zhat, g = model.predict(x_hat[mi], mu)
-            hx = model.pose_jacobian(x_hat[mi], mu)
-            zinv, zdet = sym_inv_det(g @ sig @ np.swapaxes(g, -1, -2) + r)
-            nu = model.innovation(z, zhat)
-            hz = np.swapaxes(hx, -1, -2) @ zinv  # (P, 3, dim)
-            np.add.at(lam, mi, hz @ hx)
-            np.add.at(eta, mi, (hz @ nu[..., None])[..., 0])
-            np.add.at(quad, mi, quad_form(nu, zinv) + model.dim * LOG_2PI + np.log(zdet))
-        cov, _ = sym_inv_det(lam)
-        cov = 0.5 * (cov + np.swapaxes(cov, -1, -2))
-        shift = (cov @ eta[..., None])[..., 0]
-        if mi.size:
-            touched = np.zeros(m, bool)
-            touched[mi] = True
-            _, lam_det = sym_inv_det(lam)
-            ll = -0.5 * (quad - np.einsum("mi,mi->m", eta, shift) + np.log(p_det) + np.log(lam_det))
-            log_l += np.where(touched, ll, 0.0)
+            counts = np.bincount(mi, minlength=m)
+            w = np.exp(self.log_w)
+            lost = False
+            if reloc.enabled and counts.min() > 0:
+                gate = chi2.ppf(reloc.gate_probability, self.model.dim * counts)
+                lost = bool(np.all(nis > gate))
+            if lost and counts.min() >= reloc.min_landmarks:
+                prior = np.broadcast_to(self._drift(k), motion_cov.shape).copy()
+                if not self.config.defer_motion_noise:  # else D already holds the unsampled noise
+                    prior += motion_cov
+                mode, cov, ll, nis, info = self._fold(x_hat, mi, z, r, mu, sig, prior, reloc.iterations)
+                self.relocalizations += 1
+                self._inform_drift(k, np.einsum("m,mij->ij", w, prior), np.einsum("m,mij->ij", w, info))
+            elif lost:
+                usable = False
+                self.dropped["lost_robot_observation"] += int(counts.min())
+                if self.config.defer_motion_noise:  # the noise stays pending
+                    self._noise_drawn = False
+                    return x_hat, usable
+                mode, cov = x_hat, motion_cov
+            else:
+                log_l += np.where(counts > 0, ll, 0.0)
+                if reloc.enabled:
+                    self._inform_drift(k, self._drift(k), np.einsum("m,mij->ij", w, info))
+            if lost and usable:
+                log_l += ll
         chol = np.linalg.cholesky(cov + 1e-12 * np.eye(3))
-        new = x_hat + shift + (chol @ self.rng.standard_normal((m, 3, 1)))[..., 0]
+        new = mode + (chol @ self.rng.standard_normal((m, 3, 1)))[..., 0]
         new[:, 2] = wrap_angle(new[:, 2])
         self.poses[:, k] = new
-        return new
+        return new, usable
+
+    def _fold(
+        self, x_hat: np.ndarray, mi: np.ndarray, z: np.ndarray, r: np.ndarray, mu: np.ndarray,
+        sig: np.ndarray, prior_cov: np.ndarray, iterations: int,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The Gaussian proposal N(mode, Λ⁻¹) of the poses (M, 3) given the prior N(x̂, P) and
+        the pairs (particle mi, z, r, landmark μ, Σ), relinearised ``iterations`` times at the
+        mode (iterated EKF: ν = z − ẑ(x_i) + Hₓ(x_i)(x_i − x̂)).
+
+        Returns:
+            (mode (M, 3), Λ⁻¹ (M, 3, 3), log marginal likelihood (M,), νᵀS⁻¹ν (M,),
+            observation information Σ HₓᵀZ⁻¹Hₓ (M, 3, 3)).
+        """
+        model = self.model
+        m = x_hat.shape[0]
+        lam0, p_det = sym_inv_det(prior_cov)
+        x_lin = x_hat
+        for it in range(iterations):
+            lam = lam0.copy()
+            eta = np.zeros((m, 3))
+            quad = np.zeros(m)
+            logdet = np.zeros(m)
+            if mi.size:
+                xl = x_lin[mi]
+                zhat, g = model.predict(xl, mu)
+                hx = model.pose_jacobian(xl, mu)
+                zinv, zdet = sym_inv_det(g @ sig @ np.swapaxes(g, -1, -2) + r)
+                nu = model.innovation(z, zhat)
+                if it:
+                    dx = xl - x_hat[mi]
+                    dx[:, 2] = wrap_angle(dx[:, 2])
+                    nu = nu + (hx @ dx[..., None])[..., 0]
+                hz = np.swapaxes(hx, -1, -2) @ zinv  # (P, 3, dim)
+                np.add.at(lam, mi, hz @ hx)
+                np.add.at(eta, mi, (hz @ nu[..., None])[..., 0])
+                np.add.at(quad, mi, quad_form(nu, zinv))
+                np.add.at(logdet, mi, model.dim * LOG_2PI + np.log(zdet))
+            cov, lam_det = sym_inv_det(lam)
+            cov = 0.5 * (cov + np.swapaxes(cov, -1, -2))
+            shift = (cov @ eta[..., None])[..., 0]
+            x_lin = x_hat + shift
+            x_lin[:, 2] = wrap_angle(x_lin[:, 2])
+        nis = quad - np.einsum("mi,mi->m", eta, shift)
+        ll = -0.5 * (nis + logdet + np.log(p_det) + np.log(lam_det))
+        return x_lin, cov, ll, nis, lam - lam0
+
+    def _inform_drift(self, k: int, prior: np.ndarray, info: np.ndarray) -> None:
+        """D ← (prior⁻¹ + info)⁻¹: robot k's drift covariance after a landmark update."""
+        inv = np.linalg.inv(prior + 1e-12 * np.eye(3))
+        d = np.linalg.inv(inv + info)
+        self.drift_cov[k] = 0.5 * (d + d.T)
+
+    def _drift(self, k: int) -> np.ndarray:
+        d = self.drift_cov.get(k)
+        if d is None:
+            d = np.diag(np.square(np.asarray(self.config.initial_pose_sigma, float)))
+            self.drift_cov[k] = d
+        return d
+
+    def _propagate_drift(self, k: int, odo: np.ndarray, dt: float) -> None:
+        """D ← F D Fᵀ + Q for robot k's motion ``odo`` (EKF prediction at its mean pose)."""
+        self.drift_cov[k] = self._propagate(self._drift(k), k, odo, dt)
+
+    def _propagate(self, cov: np.ndarray, k: int, odo: np.ndarray, dt: float) -> np.ndarray:
+        """F cov Fᵀ + Q: a pose covariance (3, 3, map frame) of robot k carried through its
+        motion ``odo`` [m, m, rad] over dt [s], linearised at the weighted mean heading."""
+        w = np.exp(self.log_w)
+        th = float(np.arctan2(w @ np.sin(self.poses[:, k, 2]), w @ np.cos(self.poses[:, k, 2])))
+        pose = np.array([[0.0, 0.0, th]])
+        moved, q = predict_motion(pose, odo, self.config.motion, dt)
+        f = np.eye(3)
+        f[0, 2] = -moved[0, 1]  # ∂(x ⊕ δ)/∂θ = (−Δy, Δx) in the map frame
+        f[1, 2] = moved[0, 0]
+        return f @ cov @ f.T + q[0]
+
+    def _draw_pending(self, k: int) -> None:
+        """Sample robot k's accumulated motion noise into its poses (defer_motion_noise)."""
+        cov = self.pending_cov.pop(k, None)
+        if cov is None:
+            return
+        chol = np.linalg.cholesky(cov + 1e-12 * np.eye(3))
+        self.poses[:, k] += self.rng.standard_normal((self.num_particles, 3)) @ chol.T
+        self.poses[:, k, 2] = wrap_angle(self.poses[:, k, 2])
 
     def _descriptor_filter(self, cand: np.ndarray, desc: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Keep the candidates whose descriptor distance E (eq. 16) is at most E0, nearest first.
@@ -491,9 +647,16 @@ class MultiRobotFastSLAM:
         if z.shape != (2,) or cov.shape != (2, 2) or not np.isfinite(z).all():
             self.dropped["bad_sighting"] += 1
             return
-        if not is_positive_definite(cov):
+        if np.abs(z).max() > MAX_ABS_INPUT:
             self.dropped["bad_sighting"] += 1
             return
+        if not is_positive_definite(cov) or not (
+            (np.diag(cov) >= VARIANCE_BOUNDS[0]) & (np.diag(cov) <= VARIANCE_BOUNDS[1])
+        ).all():
+            self.dropped["bad_sighting"] += 1
+            return
+        self._draw_pending(k)
+        self._draw_pending(target)
         rb = RangeBearingModel()
         zhat, _ = rb.predict(self.poses[:, k], self.poses[:, target, :2])
         nu = rb.innovation(z[None], zhat)
@@ -514,3 +677,84 @@ class MultiRobotFastSLAM:
             self.landmarks.compact()
         self.log_w = np.full(self.num_particles, -np.log(self.num_particles))
         self.resamples += 1
+
+    # ------------------------------------------------------------------ robots joining (004, issue 8)
+    def add_robot(self, name: str, poses: np.ndarray, stamp_ns: int | None = None) -> int:
+        """Make ``name`` one more robot of the filter (a robot merged late, 004 section 5).
+
+        Args:
+            name: the robot; if it already is a robot of the filter (it restarted), its poses
+                are replaced and its stamp history reset.
+            poses: (M, 3) its pose in each particle, map frame (x [m], y [m], θ [rad]).
+            stamp_ns: time of those poses (ns); its next update must be later. None: no history.
+
+        Returns:
+            the robot's index k on the K axis of :attr:`poses`.
+        """
+        poses = np.array(poses, dtype=float)
+        if poses.shape != (self.num_particles, 3) or not np.isfinite(poses).all():
+            raise FilterInputError(f"poses of {name!r} must be finite ({self.num_particles}, 3)")
+        poses[:, 2] = wrap_angle(poses[:, 2])
+        if name in self.index:
+            k = self.index[name]
+            self.poses[:, k] = poses
+        else:
+            k = len(self.robots)
+            self.robots.append(name)
+            self.index[name] = k
+            self.poses = np.concatenate([self.poses, poses[:, None]], axis=1)
+        self.last_stamp.pop(name, None)
+        if stamp_ns is not None:
+            self.last_stamp[name] = int(stamp_ns)
+        return k
+
+    def select_particles(self, index: np.ndarray, score: np.ndarray | None = None) -> None:
+        """Particle n becomes a copy of particle ``index[n]`` (in that order); weights uniform.
+
+        Poses and scores are copied by fancy indexing and landmark maps through the store's
+        copy-on-write rows, so duplicated particles never share writable state.
+
+        Args:
+            index: (M,) ancestor of each particle.
+            score: (M,) their summed log likelihoods (eq. 14) afterwards; default the ancestors'.
+        """
+        index = np.asarray(index, np.int64)
+        m = self.num_particles
+        if index.shape != (m,) or index.min(initial=0) < 0 or index.max(initial=0) >= m:
+            raise FilterInputError(f"index must be ({m},) particle indices")
+        self.poses = self.poses[index]
+        self.score = self.score[index] if score is None else np.array(score, dtype=float)
+        self.landmarks.copy_rows(np.arange(m), index)
+        self.log_w = np.full(m, -np.log(m))
+
+    def insert_landmarks(
+        self, mean: np.ndarray, cov: np.ndarray, exists: np.ndarray, descriptors: np.ndarray,
+        count: np.ndarray | None = None,
+    ) -> np.ndarray:
+        """Add N landmarks made elsewhere (another robot's map) to the particles that hold them.
+
+        Args:
+            mean: (M, N, dim) position in each particle, map frame [m].
+            cov: (M, N, dim, dim) covariances [m²].
+            exists: (M, N) bool, which particle holds which landmark.
+            descriptors: (N, D) one descriptor per landmark.
+            count: (M, N) observations behind each value (default 1).
+
+        Returns:
+            (N,) the new slots.
+        """
+        store = self.landmarks
+        exists = np.asarray(exists, bool)
+        m, n = exists.shape
+        if m != self.num_particles or mean.shape != (m, n, store.dim) or cov.shape != (m, n, store.dim, store.dim):
+            raise FilterInputError(f"landmarks must be ({self.num_particles}, N, {store.dim}[, {store.dim}])")
+        slots = store.allocate(n, np.asarray(descriptors, np.float32).reshape(n, -1))
+        mi, j = np.nonzero(exists)
+        if mi.size:
+            cnt = np.ones(mi.size, np.int64) if count is None else np.asarray(count)[mi, j]
+            store.write(
+                mi, slots[j], mean=mean[mi, j], cov=cov[mi, j], exists=True, count=cnt,
+                score=np.minimum(cnt, self.config.existence.max_score),
+            )
+            store.set_reference(slots[j], mean[mi, j])
+        return slots

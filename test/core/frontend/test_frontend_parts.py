@@ -52,6 +52,25 @@ def test_tracker_keeps_ids_and_counts_consecutive_frames():
     assert set(ids2).isdisjoint(ids0) and np.all(len2 == 1)
 
 
+def test_tracker_follows_the_common_image_motion_of_a_turning_robot():
+    # a turn moves every point by about f·ω/rate (here 100 px to the left), beyond track_radius_px
+    rng = np.random.default_rng(3)
+    desc = rng.standard_normal((12, 64)).astype(np.float32)
+    desc /= np.linalg.norm(desc, axis=1, keepdims=True)
+    xy = np.column_stack([rng.uniform(120, 300, 12), rng.uniform(10, 230, 12)])
+    moved = xy + [-100.0, 2.0] + rng.normal(0, 1.0, (12, 2))
+    tr = Tracker(FrontendConfig())
+    ids0, _ = tr.update(xy, desc)
+    ids1, len1 = tr.update(moved, desc)
+    np.testing.assert_array_equal(ids1, ids0)
+    np.testing.assert_array_equal(len1, 2)
+    np.testing.assert_allclose(tr.shift, [-100.0, 2.0], atol=1.5)
+    fixed = Tracker(FrontendConfig(track_search_px=0.0))  # gate around the old position only
+    ids0, _ = fixed.update(xy, desc)
+    ids1, len1 = fixed.update(moved, desc)
+    assert set(ids1).isdisjoint(ids0) and np.all(len1 == 1)
+
+
 def test_select_spread_takes_one_per_cell_first():
     xy = np.array([[10, 10], [12, 12], [14, 10], [300, 200], [310, 210]], float)
     strength = np.array([5.0, 4.0, 3.0, 1.0, 0.5])
