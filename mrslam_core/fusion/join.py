@@ -89,6 +89,28 @@ def move_landmarks(
     return moved, r @ cov @ np.swapaxes(r, -1, -2) + add
 
 
+def _moved_pose_covariances(
+    local: MultiRobotFastSLAM, k: int, transform: np.ndarray, transform_cov: np.ndarray | None
+) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """The local robot's drift and pending motion covariances (3, 3) moved into the common frame:
+    J_x C J_xᵀ for the pose x ↦ T ⊕ x, plus J_T Cov(T) J_Tᵀ on the drift (the alignment's own
+    uncertainty, at the local weighted mean pose). None where the local filter holds none."""
+    drift = getattr(local, "drift_cov", {}).get(k)
+    pending = getattr(local, "pending_cov", {}).get(k)
+    c, s = np.cos(transform[2]), np.sin(transform[2])
+    jx = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    if drift is not None:
+        drift = jx @ drift @ jx.T
+    if transform_cov is not None and np.isfinite(transform_cov).all():
+        w = np.exp(local.log_w)
+        x = w @ local.poses[:, k, :2]
+        jt = np.array([[1.0, 0.0, -s * x[0] - c * x[1]], [0.0, 1.0, c * x[0] - s * x[1]], [0.0, 0.0, 1.0]])
+        drift = (np.zeros((3, 3)) if drift is None else drift) + jt @ transform_cov @ jt.T
+    if pending is not None:
+        pending = jx @ pending @ jx.T
+    return drift, pending
+
+
 def systematic_draw(log_w: np.ndarray, n: int, rng: np.random.Generator) -> np.ndarray:
     """``n`` indices drawn from normalised log weights (P,) by systematic (low-variance)
     resampling, sorted (n may differ from P: here M of the M × L pairs)."""
@@ -109,6 +131,7 @@ def join_filters(
     extra_variance: float = 0.0,
     transform_cov: np.ndarray | None = None,
     per_pair: bool = False,
+    pose_cov: np.ndarray | None = None,
 ) -> JoinResult:
     """Join ``local`` (K = 1) into ``central`` particle by particle (004 section 5).
 
@@ -131,6 +154,9 @@ def join_filters(
         per_pair: refit the transform for each drawn (central, local) pair by least squares on
             the matched landmarks both particles hold (at least two; else ``transform``), so
             that the robot is placed consistently with each central particle's own map.
+        pose_cov: (3, 3) covariance of ``transform`` added (propagated to the robot's pose) to
+            the drift covariance it enters the joint filter with (default ``transform_cov``); the
+            local filter's drift and pending motion noise are moved into the common frame too.
     """
     t = np.asarray(transform, float)
     if t.shape != (3,) or not np.isfinite(t).all():
@@ -176,7 +202,8 @@ def join_filters(
     central.select_particles(anc_c, central.score[anc_c] + local.score[anc_l])
     central.log_w = normalise_log_weights(pair_ll)
     stamp = local.last_stamp.get(local.robots[kl])
-    central.add_robot(name, compose(t_all, local.poses[anc_l, kl]), stamp)
+    drift, pending = _moved_pose_covariances(local, kl, t, transform_cov if pose_cov is None else pose_cov)
+    central.add_robot(name, compose(t_all, local.poses[anc_l, kl]), stamp, drift, pending)
 
     rows = np.arange(m)[:, None]
     slot_map = np.full(ls_store.size, -1, np.int64)
@@ -244,5 +271,6 @@ def try_join(
     extra = (config.residual_variance_scale * al.rmse) ** 2
     t_cov = al.cov * config.transform_sampling_scale**2 if config.transform_sampling_scale > 0 else None
     return al, join_filters(
-        central, local, al.transform, pairs, config, robot, drop, extra, t_cov, config.per_particle_alignment
+        central, local, al.transform, pairs, config, robot, drop, extra, t_cov, config.per_particle_alignment,
+        pose_cov=al.cov,
     )

@@ -1,0 +1,98 @@
+"""Pairwise 2D alignment: exact recovery, RANSAC with wrong matches, and clear rejections.
+
+Frames: the transform (tx, ty, θ) moves source-map points into the target map, p_t = R p_s + t.
+"""
+
+import numpy as np
+import pytest
+
+from mrslam_core.fusion.alignment import (
+    alignment_error,
+    apply_transform,
+    match_descriptors,
+    ransac_align,
+    rigid_transform_2d,
+)
+from mrslam_core.fusion.config import FusionConfig
+from mrslam_core.fusion.maps import LandmarkMap
+from mrslam_core.fusion.synthetic import make_map_pair
+
+
+def test_closed_form_recovers_a_known_transform_exactly():
+    rng = np.random.default_rng(0)
+    src = rng.uniform(-5, 5, (12, 2))
+    truth = np.array([1.5, -0.7, 2.8])  # θ beyond π/2 on purpose
+    dst = apply_transform(truth, src)
+    np.testing.assert_allclose(rigid_transform_2d(src, dst), truth, atol=1e-12)
+    # weights do not matter without noise; two points are enough
+    np.testing.assert_allclose(rigid_transform_2d(src, dst, rng.uniform(0.1, 5, 12)), truth, atol=1e-12)
+    np.testing.assert_allclose(rigid_transform_2d(src[:2], dst[:2]), truth, atol=1e-12)
+
+
+def test_weighted_fit_follows_the_weights():
+    # a corrupted third pair with (almost) zero weight is ignored
+    src = np.array([[0.0, 0.0], [4.0, 0.0], [0.0, 3.0]])
+    truth = np.array([2.0, 1.0, 0.3])
+    dst = apply_transform(truth, src)
+    dst[2] += [1.0, -1.0]
+    est = rigid_transform_2d(src, dst, np.array([1.0, 1.0, 1e-12]))
+    np.testing.assert_allclose(est, truth, atol=1e-9)
+
+
+def test_mutual_descriptor_matches():
+    t = np.eye(4, dtype=np.float32)
+    s = np.array([[0, 0, 0.9, 0], [1, 0, 0, 0], [0.95, 0, 0, 0], [0, 0, 0, 0.1]], np.float32)
+    pairs = match_descriptors(t, s, 0.5, mutual=True)
+    # source 0 ↔ target 2; target 0's nearest source is row 1 (exact), so row 2 loses; row 3 too far
+    assert {tuple(p) for p in pairs} == {(2, 0), (0, 1)}
+    assert len(match_descriptors(t, s, 0.5, mutual=False)) == 3
+
+
+def test_noiseless_maps_align_exactly():
+    rng = np.random.default_rng(1)
+    truth = np.array([-4.0, 7.0, -1.2])
+    pair = make_map_pair(rng, truth, 40, 0.5, 0.0, noise=0.0)
+    al = ransac_align(pair.target, pair.source, FusionConfig())
+    assert al.accepted, al.reason
+    np.testing.assert_allclose(al.transform, truth, atol=1e-9)
+    assert al.rmse < 1e-9 and al.inliers.size == 20
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_ransac_with_30_percent_outlier_matches(seed):
+    rng = np.random.default_rng(seed)
+    truth = np.array([3.0, -2.0, 0.7])
+    pair = make_map_pair(rng, truth, 100, 0.5, 0.3, noise=0.03)
+    al = ransac_align(pair.target, pair.source, FusionConfig(seed=seed))
+    assert al.accepted, al.reason
+    wrong = np.isin(pair.source.ids[al.matches[:, 1]], pair.outliers)
+    assert 0.28 <= wrong.mean() <= 0.32  # the matches really hold 30 % wrong ones
+    assert not wrong[al.inliers].any()  # and none of them survives as an inlier
+    dt, dth = alignment_error(al.transform, truth)
+    assert dt <= 0.05 and np.degrees(dth) <= 1.0, (dt, np.degrees(dth))
+
+
+def test_disjoint_maps_are_not_merged_and_say_why():
+    rng = np.random.default_rng(3)
+    pair = make_map_pair(rng, np.array([1.0, 2.0, 0.5]), 50, 0.0, 0.0, noise=0.03)
+    al = ransac_align(pair.target, pair.source, FusionConfig())
+    assert not al.accepted
+    assert "do not overlap" in al.reason and "0 descriptor matches" in al.reason
+    # same maps, but every descriptor match points at the wrong place (all swapped)
+    pair = make_map_pair(rng, np.array([1.0, 2.0, 0.5]), 50, 0.4, 1.0, noise=0.03)
+    al = ransac_align(pair.target, pair.source, FusionConfig())
+    assert not al.accepted and len(al.matches) == 20
+    assert "inliers of 20 descriptor matches" in al.reason and "need 6" in al.reason
+
+
+def test_rejects_large_residual_and_collapsed_inliers():
+    rng = np.random.default_rng(4)
+    pair = make_map_pair(rng, np.array([0.5, 0.5, 0.1]), 40, 0.5, 0.0, noise=0.12)
+    al = ransac_align(pair.target, pair.source, FusionConfig(inlier_distance=0.6, max_residual=0.1))
+    assert not al.accepted and "RMSE" in al.reason
+    # eight matched landmarks within a few cm of each other: rotation undetermined
+    pts = np.column_stack([rng.normal(0, 0.02, (8, 2)), np.zeros(8)])
+    desc = np.eye(8, dtype=np.float32)
+    m = LandmarkMap(pts, np.broadcast_to(np.eye(3) * 1e-4, (8, 3, 3)), desc)
+    al = ransac_align(m, m, FusionConfig())
+    assert not al.accepted and "rotation undetermined" in al.reason

@@ -1,0 +1,197 @@
+"""Joining a robot's own filter (K = 1, its own frame) into the central filter, particle by particle
+(004 section 5)."""
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from mrslam_core.datasets.synthetic import SyntheticWorld, SyntheticWorldConfig
+from mrslam_core.fusion.config import FusionConfig
+from mrslam_core.fusion.join import join_filters, move_landmarks, try_join
+from mrslam_core.fusion.kalman import kalman_fuse
+from mrslam_core.geometry.se2 import between, compose, wrap_angle
+from mrslam_core.slam.config import FilterConfig
+from mrslam_core.slam.filter import MultiRobotFastSLAM
+
+T = np.array([2.0, -1.0, 0.6])  # local frame -> central map frame
+
+
+def spd(rng, n):
+    a = rng.standard_normal((n, 3, 3)) * 0.1
+    return a @ a.transpose(0, 2, 1) + 0.01 * np.eye(3)
+
+
+def hand_filters(seed=0):
+    """Central: 6 particles, robot 'a', 3 landmarks (descriptors e0 e1 e2; particle 5 lacks e1).
+    Local: 4 particles, robot 'b', 4 landmarks (e0 e1 shared with central, e3 e4 new; particle 3
+    lacks e3)."""
+    rng = np.random.default_rng(seed)
+    eye = np.eye(5, dtype=np.float32)
+    central = MultiRobotFastSLAM(FilterConfig(num_particles=6, seed=seed), ["a"], np.zeros((1, 3)))
+    central.poses[:, 0] = rng.normal(0, 1, (6, 3))
+    ex = np.ones((6, 3), bool)
+    ex[5, 1] = False
+    central.insert_landmarks(rng.normal(0, 3, (6, 3, 3)), spd(rng, 18).reshape(6, 3, 3, 3), ex, eye[:3],
+                             np.full((6, 3), 2))
+    central.log_w = np.log(np.array([0.3, 0.1, 0.2, 0.1, 0.2, 0.1]))
+    local = MultiRobotFastSLAM(FilterConfig(num_particles=4, seed=seed + 1), ["b"], np.zeros((1, 3)))
+    local.poses[:, 0] = rng.normal(0, 1, (4, 3))
+    ex = np.ones((4, 4), bool)
+    ex[3, 2] = False
+    local.insert_landmarks(rng.normal(0, 3, (4, 4, 3)), spd(rng, 16).reshape(4, 4, 3, 3), ex, eye[[0, 1, 3, 4]])
+    local.log_w = np.log(np.array([0.4, 0.3, 0.2, 0.1]))
+    local.last_stamp["b"] = 7_000_000_000
+    return central, local
+
+
+def test_join_keeps_particles_poses_and_fuses_per_particle():
+    central, local = hand_filters()
+    c_poses = central.poses.copy()
+    c_lm = central.landmarks.gather(np.arange(6)[:, None], np.arange(3)[None], ("mean", "cov", "exists"))
+    l_lm = local.landmarks.gather(np.arange(4)[:, None], np.arange(4)[None], ("mean", "cov", "exists"))
+    res = join_filters(central, local, T, np.array([[0, 0], [1, 1]]), FusionConfig())
+    ic, il = res.ancestors.T
+    # M particles, K + 1 robots; the existing robot keeps its ancestor's pose exactly
+    assert central.poses.shape == (6, 2, 3) and central.robots == ["a", "b"]
+    np.testing.assert_array_equal(central.poses[:, 0], c_poses[ic, 0])
+    # the joined robot's pose is its local pose moved by T
+    np.testing.assert_allclose(central.poses[:, 1], compose(T, local.poses[il, 0]), atol=1e-12)
+    assert central.last_stamp["b"] == 7_000_000_000
+    np.testing.assert_allclose(np.exp(central.log_w), 1 / 6)
+    # matched landmarks: Kalman fusion of the two ancestors' copies (float32 storage)
+    mean, cov, ex = central.landmarks.gather(np.arange(6)[:, None], np.arange(3)[None], ("mean", "cov", "exists"))
+    ml, sl = move_landmarks(T, l_lm[0].astype(float), l_lm[1].astype(float))
+    for n in range(6):
+        for slot in (0, 1):
+            if c_lm[2][ic[n], slot]:
+                c, s = kalman_fuse(c_lm[0][ic[n], slot], c_lm[1][ic[n], slot], ml[il[n], slot], sl[il[n], slot])
+            else:  # the central particle lacked it: the local copy, moved
+                c, s = ml[il[n], slot], sl[il[n], slot]
+            np.testing.assert_allclose(mean[n, slot], c, rtol=1e-5, atol=1e-5)
+            np.testing.assert_allclose(cov[n, slot], s, rtol=1e-4, atol=1e-6)
+        np.testing.assert_array_equal(mean[n, 2], c_lm[0][ic[n], 2])  # unmatched: untouched
+    assert ex[:, :3].all()
+    # the two local-only landmarks became new slots holding the moved local values
+    assert res.fused == 2 and res.added == 2 and res.slot_map.tolist() == [0, 1, 3, 4]
+    new_mean, new_ex = central.landmarks.gather(np.arange(6)[:, None], np.array([3, 4])[None], ("mean", "exists"))
+    np.testing.assert_array_equal(new_ex[:, 0], il != 3)
+    np.testing.assert_allclose(new_mean[new_ex], ml[il][:, 2:][new_ex], atol=1e-5)
+    np.testing.assert_array_equal(central.landmarks.descriptor[4], np.eye(5, dtype=np.float32)[4])
+
+
+def test_drift_and_pending_motion_noise_move_with_the_robot():
+    central, local = hand_filters(5)
+    d = np.diag([0.04, 0.01, 0.002])
+    local.drift_cov[0] = d
+    local.pending_cov[0] = 2 * d
+    join_filters(central, local, T, np.array([[0, 0]]), FusionConfig())
+    c, s = np.cos(T[2]), np.sin(T[2])
+    j = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1.0]])
+    np.testing.assert_allclose(central.drift_cov[1], j @ d @ j.T, atol=1e-15)
+    np.testing.assert_allclose(central.pending_cov[1], 2 * j @ d @ j.T, atol=1e-15)
+    # with the alignment's covariance, the drift grows by it (θ uncertainty with lever arm)
+    central, local = hand_filters(5)
+    local.drift_cov[0] = d
+    cov_t = np.diag([0.01, 0.01, 0.001])
+    join_filters(central, local, T, np.array([[0, 0]]), FusionConfig(), pose_cov=cov_t)
+    extra = central.drift_cov[1] - j @ d @ j.T
+    assert np.all(np.diag(extra) >= np.diag(cov_t) - 1e-15) and extra[2, 2] == pytest.approx(0.001)
+
+
+def test_restarted_robot_rejoins_in_place():
+    central, local = hand_filters(3)
+    join_filters(central, local, T, np.array([[0, 0]]), FusionConfig())
+    other = central.poses[:, 0].copy()
+    # robot b restarts: a fresh local filter with a later stamp, joined with another transform
+    _, again = hand_filters(4)
+    again.last_stamp["b"] = 9_000_000_000
+    t2 = np.array([-1.0, 0.5, -2.0])
+    res = join_filters(central, again, t2, np.array([[0, 0]]), FusionConfig())
+    assert central.robots == ["a", "b"] and central.poses.shape == (6, 2, 3)
+    np.testing.assert_allclose(central.poses[:, 1], compose(t2, again.poses[res.ancestors[:, 1], 0]), atol=1e-12)
+    np.testing.assert_array_equal(central.poses[:, 0], other[res.ancestors[:, 0]])
+    assert central.last_stamp["b"] == 9_000_000_000
+
+
+def test_joined_particles_do_not_alias():
+    central, local = hand_filters(1)
+    join_filters(central, local, T, np.array([[0, 0]]), FusionConfig())
+    store = central.landmarks
+    slots = np.arange(store.size)
+    before = store.gather(np.arange(6)[:, None], slots[None], ("mean",))[0].copy()
+    store.write(np.zeros(slots.size, int), slots, mean=np.full((slots.size, 3), 9.0))
+    after = store.gather(np.arange(6)[:, None], slots[None], ("mean",))[0]
+    np.testing.assert_array_equal(after[1:], before[1:])
+    assert (after[0] == 9.0).all()
+
+
+def test_pair_likelihood_weights_the_pairs_whose_maps_agree():
+    central, local = hand_filters(2)
+    # every central particle holds slots 0 and 1 at the same place; local particle 2 agrees with
+    # it after the transform, the other local particles are 1 m off
+    truth = np.array([[1.0, 2.0, 0.5], [3.0, -1.0, 1.0]])
+    m = central.num_particles
+    central.landmarks.write(np.repeat(np.arange(m), 2), np.tile([0, 1], m), mean=np.tile(truth, (m, 1)))
+    in_local = between(T, np.column_stack([truth[:, :2], np.zeros(2)]))  # the landmarks in the local frame
+    agree = np.column_stack([in_local[:, :2], truth[:, 2]])
+    vals = np.repeat(agree[None], 4, axis=0) + np.array([1.0, 0.0, 0.0])
+    vals[2] = agree
+    local.landmarks.write(np.repeat(np.arange(4), 2), np.tile([0, 1], 4), mean=vals.reshape(-1, 3))
+    res = join_filters(central, local, T, np.array([[0, 0], [1, 1]]), FusionConfig(pair_likelihood=True))
+    w = np.exp(central.log_w)
+    good = res.ancestors[:, 1] == 2
+    assert good.any() and (~good).any()
+    assert w[good].min() > 100 * w[~good].max()
+    np.testing.assert_allclose(w.sum(), 1.0)
+    # refitted per pair, the 1 m offset is absorbed by each pair's own transform
+    central, local = hand_filters(2)
+    central.landmarks.write(np.repeat(np.arange(m), 2), np.tile([0, 1], m), mean=np.tile(truth, (m, 1)))
+    local.landmarks.write(np.repeat(np.arange(4), 2), np.tile([0, 1], 4), mean=vals.reshape(-1, 3))
+    res = join_filters(central, local, T, np.array([[0, 0], [1, 1]]), FusionConfig(), per_pair=True)
+    off = res.ancestors[:, 1] != 2
+    np.testing.assert_allclose(res.transforms[~off], np.broadcast_to(T, ((~off).sum(), 3)), atol=1e-9)
+    shift = T[:2] - np.array([[np.cos(T[2]), -np.sin(T[2])], [np.sin(T[2]), np.cos(T[2])]]) @ [1.0, 0.0]
+    np.testing.assert_allclose(res.transforms[off, :2], np.broadcast_to(shift, (off.sum(), 2)), atol=1e-9)
+    mean = central.landmarks.gather(np.arange(m)[:, None], np.array([0, 1])[None], ("mean",))[0]
+    np.testing.assert_allclose(mean, np.broadcast_to(truth, (m, 2, 3)), atol=1e-5)
+
+
+def test_robot_with_unknown_start_joins_the_team_filter():
+    """Synthetic stereo world, 2 robots half a loop apart: robot2 maps from its own origin (K = 1),
+    tries to join every 5 steps, is joined once its map overlaps robot1's, then runs in the
+    central filter."""
+    world_cfg = SyntheticWorldConfig(seed=1, num_robots=2, sigma_d=1.0, sigma_r=10.0, sigma_c=10.0)
+    world = SyntheticWorld(world_cfg)
+    fcfg = FilterConfig(num_particles=40, seed=3)
+    starts = world.start_poses()
+    central = MultiRobotFastSLAM(fcfg, ["robot1"], starts[:1])
+    local = MultiRobotFastSLAM(replace(fcfg, seed=4), ["robot2"], np.zeros((1, 3)))
+    err, reasons = [], []
+    joined_at = None
+    for i, (_, true, _, updates) in enumerate(world.run(110)):
+        if joined_at is None:
+            central.step(updates[:1])
+            local.step(updates[1:])
+            if i % 5 == 4:
+                al, joined = try_join(central, local, FusionConfig())
+                if joined is None:
+                    reasons.append(al.reason)
+                    continue
+                joined_at = i
+                # the alignment is robot2's start pose in the map
+                assert np.hypot(*(al.transform[:2] - starts[1, :2])) < 0.15
+                assert abs(wrap_angle(al.transform[2] - starts[1, 2])) < np.radians(2)
+                assert al.inliers.size >= 6
+                # each joined particle: the local pose moved by that pair's own refitted transform
+                np.testing.assert_allclose(
+                    central.poses[:, 1], compose(joined.transforms, local.poses[joined.ancestors[:, 1], 0])
+                )
+                assert np.abs(joined.transforms[:, :2] - al.transform[:2]).max() < 0.3
+        else:
+            central.step(updates)
+            err.append(np.linalg.norm(central.estimate().poses[1, :2] - true[1, :2]))
+    assert joined_at is not None and joined_at <= 80, reasons
+    assert "do not overlap" in reasons[0]  # the early attempts fail for the right reason
+    assert central.robots == ["robot1", "robot2"] and central.num_particles == 40
+    assert np.sqrt(np.mean(np.square(err))) < 0.15, err  # 0.035 m measured
