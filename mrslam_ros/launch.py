@@ -116,9 +116,17 @@ class LaunchConfig:
             raise ValueError(f"node names must be unique per namespace: {dup}")
 
 
-def _drop_none(value: Any) -> Any:
+def _ros_params(value: Any) -> Any:
+    """Params as ROS params files need them: no None values, and lists of numbers that mix
+    integers and floats (``[0, 0.12]`` in YAML) all floats, since ROS rejects mixed arrays."""
     if isinstance(value, dict):
-        return {k: _drop_none(v) for k, v in value.items() if v is not None}
+        return {k: _ros_params(v) for k, v in value.items() if v is not None}
+    if isinstance(value, (list, tuple)):
+        items = [_ros_params(v) for v in value]
+        numbers = [v for v in items if isinstance(v, (int, float)) and not isinstance(v, bool)]
+        if numbers and len(numbers) == len(items) and any(isinstance(v, float) for v in numbers):
+            return [float(v) for v in items]
+        return items
     return value
 
 
@@ -147,7 +155,7 @@ class Launcher:
         return path if path.is_absolute() else self.base_dir / path
 
     def _params_file(self, spec: NodeSpec) -> Path:
-        params = dict(_drop_none(spec.params))
+        params = dict(_ros_params(spec.params))
         params["use_sim_time"] = self.config.use_sim_time if spec.use_sim_time is None else spec.use_sim_time
         path = Path(self._tmp.name) / f"{spec.label.replace('/', '_')}.yaml"
         path.write_text(yaml.safe_dump({"/**": {"ros__parameters": params}}))

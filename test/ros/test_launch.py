@@ -149,3 +149,17 @@ def test_example_config_matches_the_node_configs(capsys):
         assert main([str(path), "--dry-run"]) == 0
         out = capsys.readouterr().out.splitlines()
         assert len(out) == len(cfg.nodes) and all(" -m mrslam_ros." in line for line in out)
+
+
+def test_params_files_make_mixed_number_lists_floats(tmp_path):
+    import yaml
+
+    from mrslam_ros.launch import LaunchConfig, Launcher, NodeSpec
+
+    spec = NodeSpec("mrslam_ros.frontend_node", "frontend", params={"t_base_cam": [0, 0.5, 1], "names": ["a"], "n": 3, "x": None})
+    launcher = Launcher(LaunchConfig(nodes=[spec]))
+    cmd = launcher.command(spec)
+    params = yaml.safe_load(open(cmd[-1]))["/**"]["ros__parameters"]
+    assert params == {"t_base_cam": [0.0, 0.5, 1.0], "names": ["a"], "n": 3, "use_sim_time": False}
+    assert all(isinstance(v, float) for v in params["t_base_cam"])
+    launcher.stop()
