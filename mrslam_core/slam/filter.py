@@ -20,7 +20,6 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
-
 from scipy.stats import chi2
 
 from mrslam_core.geometry.se2 import wrap_angle
@@ -393,7 +392,9 @@ class MultiRobotFastSLAM:
             pv = pair[mi, bi]
             slots = vslots[pv]
             conf = confirmed[mi, pv]
-            mu_s, sig_s = mu[mi, pv], sig[mi, pv]
+            pick = mi * vslots.size + pv  # rows of the flattened (M, V) pairs; np.take is
+            mu_s = np.take(mu.reshape(-1, dim), pick, axis=0)  # much faster than mu[mi, pv]
+            sig_s = np.take(sig.reshape(-1, dim * dim), pick, axis=0).reshape(-1, dim, dim)
             if motion_cov is not None:
                 poses, usable = self._sample_proposal(
                     k, mi[conf], z[bi[conf]], r[bi[conf]], mu_s[conf], sig_s[conf], motion_cov, log_l
@@ -451,7 +452,8 @@ class MultiRobotFastSLAM:
             w = np.exp(self.log_w)
             lost = False
             if reloc.enabled and counts.min() > 0:
-                gate = chi2.ppf(reloc.gate_probability, self.model.dim * counts)
+                dofs, inv = np.unique(self.model.dim * counts, return_inverse=True)
+                gate = chi2.ppf(reloc.gate_probability, dofs)[inv]  # a few distinct dofs only
                 lost = bool(np.all(nis > gate))
             if lost and counts.min() >= reloc.min_landmarks:
                 prior = np.broadcast_to(self._drift(k), motion_cov.shape).copy()
@@ -679,7 +681,10 @@ class MultiRobotFastSLAM:
         self.resamples += 1
 
     # ------------------------------------------------------------------ robots joining (004, issue 8)
-    def add_robot(self, name: str, poses: np.ndarray, stamp_ns: int | None = None) -> int:
+    def add_robot(
+        self, name: str, poses: np.ndarray, stamp_ns: int | None = None,
+        drift_cov: np.ndarray | None = None, pending_cov: np.ndarray | None = None,
+    ) -> int:
         """Make ``name`` one more robot of the filter (a robot merged late, 004 section 5).
 
         Args:
@@ -687,6 +692,10 @@ class MultiRobotFastSLAM:
                 are replaced and its stamp history reset.
             poses: (M, 3) its pose in each particle, map frame (x [m], y [m], θ [rad]).
             stamp_ns: time of those poses (ns); its next update must be later. None: no history.
+            drift_cov: (3, 3) its drift covariance (map frame, see :attr:`drift_cov`); None:
+                the initial σ² of the config.
+            pending_cov: (3, 3) motion noise accumulated but not yet sampled (map frame,
+                ``defer_motion_noise``); None: none.
 
         Returns:
             the robot's index k on the K axis of :attr:`poses`.
@@ -706,6 +715,10 @@ class MultiRobotFastSLAM:
         self.last_stamp.pop(name, None)
         if stamp_ns is not None:
             self.last_stamp[name] = int(stamp_ns)
+        for store, cov in ((self.drift_cov, drift_cov), (self.pending_cov, pending_cov)):
+            store.pop(k, None)
+            if cov is not None:
+                store[k] = 0.5 * (np.asarray(cov, float) + np.asarray(cov, float).T)
         return k
 
     def select_particles(self, index: np.ndarray, score: np.ndarray | None = None) -> None:

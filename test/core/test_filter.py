@@ -175,3 +175,92 @@ def test_hungarian_leaves_fewer_duplicates_than_ml_on_the_ambiguous_world():
 
     dup = {mode: sum(ambiguous_run(mode, seed, 30)["duplicated_fraction"] for seed in (5, 7)) for mode in ("ml", "hungarian")}
     assert dup["hungarian"] < dup["ml"], dup
+
+
+# ---------------------------------------------------------------- lost robots (MR.CLAM robot 4)
+_LANDMARKS = np.array([[3.0, 1.0], [2.0, -2.0], [-1.0, 3.0]])  # map frame [m]
+
+
+def _rb(pose, idx):
+    """Exact range-bearing observations of landmarks ``idx`` from ``pose`` (x, y, θ)."""
+    d = _LANDMARKS[idx] - pose[:2]
+    z = np.column_stack([np.hypot(d[:, 0], d[:, 1]), np.arctan2(d[:, 1], d[:, 0]) - pose[2]])
+    z[:, 1] = (z[:, 1] + np.pi) % (2 * np.pi) - np.pi
+    return ObservationSet("a", 0, z, np.broadcast_to(np.diag([0.01, 0.0004]), (len(idx), 2, 2)),
+                          np.eye(len(_LANDMARKS), 8, dtype=np.float32)[idx])
+
+
+def _lost_robot_filter(**kw):
+    """One robot that mapped three landmarks at the origin, then had all its particles moved
+    1 m and 0.4 rad away from its true pose (as after a long stretch without landmarks)."""
+    from mrslam_core.slam.config import MotionConfig, RelocalizationConfig
+
+    cfg = FilterConfig(
+        num_particles=50, seed=10, proposal="fastslam2", observation_model="range_bearing",
+        motion=MotionConfig(sigma_xy_rw=0.01, sigma_theta_rw=0.01),
+        association=AssociationConfig(candidate_search="descriptor", descriptor_trust_gate=1e4),
+        relocalization=RelocalizationConfig(enabled=True), **kw,
+    )
+    slam = MultiRobotFastSLAM(cfg, ["a"], np.zeros((1, 3)))
+    for t in range(1, 4):
+        slam.step([RobotUpdate("a", t * 10**8, np.zeros(3), _rb(np.zeros(3), [0, 1, 2]))])
+    slam.poses[:, 0] += [1.0, -0.5, 0.4]
+    slam.drift_cov[0] = np.diag([1.0, 1.0, 0.3])  # what the motion model accumulated meanwhile
+    return slam
+
+
+def test_lost_robot_is_relocalised_from_two_landmarks():
+    slam = _lost_robot_filter()
+    _, map_before, _, _, _ = slam.best_map()
+    slam.step([RobotUpdate("a", 10**9, np.zeros(3), _rb(np.zeros(3), [0, 1]))])
+    assert slam.relocalizations == 1
+    est = slam.estimate()
+    assert np.hypot(*est.mean[0, :2]) < 0.05 and abs(est.mean[0, 2]) < 0.02, est.mean
+    _, map_after, _, _, _ = slam.best_map()
+    np.testing.assert_allclose(map_after, map_before, atol=0.06)  # the map was not dragged
+    # the drift covariance was shrunk by the observations
+    assert np.trace(slam.drift_cov[0]) < 0.05
+
+
+def test_lost_robot_sets_aside_a_single_landmark_and_keeps_the_map():
+    slam = _lost_robot_filter()
+    _, map_before, _, _, _ = slam.best_map()
+    poses = slam.poses.copy()
+    slam.step([RobotUpdate("a", 10**9, np.zeros(3), _rb(np.zeros(3), [2]))])
+    assert slam.relocalizations == 0 and slam.dropped["lost_robot_observation"] == 1
+    _, map_after, _, _, _ = slam.best_map()
+    np.testing.assert_array_equal(map_after, map_before)
+    assert np.abs(slam.poses - poses).max() < 0.1  # only motion noise, no pull to the landmark
+
+
+def test_without_relocalisation_the_lost_robot_stays_lost():
+    from mrslam_core.slam.config import RelocalizationConfig
+
+    slam = _lost_robot_filter()
+    slam.config = replace(slam.config, relocalization=RelocalizationConfig(enabled=False))
+    _, map_before, _, _, _ = slam.best_map()
+    slam.step([RobotUpdate("a", 10**9, np.zeros(3), _rb(np.zeros(3), [0, 1]))])
+    assert np.hypot(*slam.estimate().mean[0, :2]) > 0.5
+    _, map_after, _, _, _ = slam.best_map()
+    assert np.abs(map_after - map_before).max() > 0.1  # its observations drag the shared map
+
+
+def test_deferred_motion_noise_follows_odometry_until_measured():
+    from mrslam_core.slam.config import MotionConfig
+
+    cfg = FilterConfig(num_particles=100, seed=11, observation_model="range_bearing", proposal="fastslam2",
+                       motion=MotionConfig(sigma_xy_rw=0.05, sigma_theta_rw=0.05), defer_motion_noise=True)
+    slam = MultiRobotFastSLAM(cfg, ["a", "b"], np.array([[0.0, 0, 0], [2.0, 0, 0]]))
+    for t in range(1, 11):  # robot a drives 1 m straight, nothing measures it
+        slam.step([RobotUpdate("a", t * 10**8, np.array([0.1, 0.0, 0.0]))])
+    np.testing.assert_allclose(slam.poses[:, 0], np.broadcast_to([1.0, 0.0, 0.0], (100, 3)), atol=1e-12)
+    pending = slam.pending_cov[0]
+    # heading random walk 0.05²·1 s; carried through the motion it adds lateral (y) variance
+    assert pending[2, 2] > 0.0025 and pending[1, 1] > pending[0, 0] + 3e-4
+    np.testing.assert_allclose(slam.estimate().cov[0], pending, atol=1e-12)  # reported uncertainty
+    # a sighting draws the pending noise once, then scores the particles
+    cov = np.diag([0.01, 0.001])
+    slam.step([RobotUpdate("b", 11 * 10**8, np.zeros(3), sightings=[RobotSighting("b", "a", np.array([1.0, np.pi]), cov)])])
+    assert 0 not in slam.pending_cov
+    spread = slam.poses[:, 0, :2].std(axis=0)
+    assert np.all(spread > 0.01)

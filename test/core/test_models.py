@@ -72,3 +72,22 @@ def test_new_landmark_covariance_is_inverse_information():
 def test_unknown_model_name():
     with pytest.raises(ValueError, match="unknown observation model"):
         make_model("lidar")
+
+
+def test_stereo_score_on_candidate_pairs_equals_generic():
+    # the filter's call: poses (M, 1, 3), observations (1, B, ·), V pairs picking observation index[v]
+    rng = np.random.default_rng(4)
+    fast = StereoPointModel()
+    m, b, v = 7, 5, 9
+    poses = np.column_stack([rng.uniform(-1, 1, (m, 2)), rng.uniform(-3, 3, m)])[:, None, :]
+    z = rng.uniform(-3, 3, (1, b, 3))
+    a = rng.standard_normal((1, b, 3, 3))
+    r = a @ np.swapaxes(a, -1, -2) * 0.01 + 0.01 * np.eye(3)
+    index = rng.integers(0, b, v)
+    mu = rng.uniform(-3, 3, (m, v, 3)).astype(np.float32)
+    c = rng.standard_normal((m, v, 3, 3))
+    sig = (c @ np.swapaxes(c, -1, -2) * 0.01 + 0.01 * np.eye(3)).astype(np.float32)
+    got = fast.score(poses, z, r, mu, sig, index=index)
+    want = ObservationModel.score(fast, np.broadcast_to(poses, (m, v, 3)), z[:, index], r[:, index], mu, sig)
+    for g, w in zip(got, want):
+        np.testing.assert_allclose(g, w, rtol=1e-6)

@@ -52,20 +52,18 @@ def test_short_run_writes_consistent_metrics(mrclam6):
 def test_joint_filter_accuracy_on_dataset6(mrclam6):
     """docs/results.md, MR.CLAM table: the default config, seed 0, all 772 s.
 
-    Robot 4 is held to a looser bound: it sees no landmark from 240 s to 320 s and whether the
-    joint filter's particles cover its true pose when it does varies from run to run (0.23–0.91 m
-    over seeds and float precision); the other four robots are stable.
+    Issue 2's target for every robot: ATE ≤ 0.25 m and ≤ 30 % of its dead reckoning. Robot 4
+    (no landmark from 240 s to 340 s) relies on deferred motion noise while unobserved and on
+    re-localisation when it returns; seed 0 gives 0.157 0.190 0.206 0.235 0.190 m.
     """
     ds = MrclamDataset(mrclam6)
     joint = run(ds, MrclamConfig())
     ate = {n: robot_metrics(tr) for n, tr in joint["trajectories"].items()}
     for name, m in ate.items():
-        if name != "robot4":
-            assert m["ate_rmse_m"] <= 0.30, (name, m)
-            assert m["ate_over_odom"] <= 0.20, (name, m)
-    assert ate["robot4"]["ate_rmse_m"] <= 1.0
+        assert m["ate_rmse_m"] <= 0.25, (name, m)
+        assert m["ate_over_odom"] <= (0.30 if name == "robot4" else 0.20), (name, m)
     mean_joint = np.mean([m["ate_rmse_m"] for m in ate.values()])
-    assert mean_joint <= 0.40
+    assert mean_joint <= 0.22
     indep = run(ds, replace(MrclamConfig(), mode="independent"))
     mean_indep = np.mean([robot_metrics(tr)["ate_rmse_m"] for tr in indep["trajectories"].values()])
     assert mean_joint < mean_indep

@@ -1,4 +1,4 @@
-"""Faults in a live team run (config/demo_faults.yaml, 2 robots, 70 simulated s): the central node
+"""Faults in a live team run (config/demo_faults.yaml, 2 robots, 55 simulated s): the central node
 killed with SIGKILL and restarted with --resume from its checkpoint, robot2's frontend stopped for
 30 s (a robot gone silent, then back), robot1's frontend killed and restarted. The run completes,
 the central node resumes where its checkpoint left it, and every robot's ATE stays within 1.5× of
@@ -53,12 +53,12 @@ def test_the_resumed_central_node_kept_the_trajectories_from_before_the_kill(run
     est = np.load(tmp / "faults" / "slam" / "estimates.npz")
     for robot in ("robot1", "robot2"):
         t = est[f"{robot}.t"] * 1e-9
-        assert t.min() < 5.0 and t.max() > 65.0, robot  # from before the kill at 15 s to the end
+        assert t.min() < 5.0 and t.max() > 52.0, robot  # from before the kill at 10 s to the end
         gaps = np.diff(t)
         assert gaps.max() < 35.0
     t2 = est["robot2.t"] * 1e-9
-    # robot2 was silent from 25 s to 55 s: no updates in between, updates again after it came back
-    assert not ((t2 > 27.0) & (t2 < 52.0)).any() and (t2 > 56.0).sum() >= 40
+    # robot2 was silent from 15 s to 45 s: no updates in between, updates again after it came back
+    assert not ((t2 > 17.0) & (t2 < 42.0)).any() and (t2 > 46.0).sum() >= 30
 
 
 def test_accuracy_stays_within_the_bound_of_an_uninterrupted_run(runs):
