@@ -44,7 +44,7 @@ def test_tracker_keeps_ids_and_counts_consecutive_frames():
     desc /= np.linalg.norm(desc, axis=1, keepdims=True)
     xy = rng.uniform(0, 300, (5, 2))
     tr = Tracker(FrontendConfig())
-    ids0, len0 = tr.update(xy, desc)
+    ids0, _ = tr.update(xy, desc)
     ids1, len1 = tr.update(xy + 3.0, desc)
     np.testing.assert_array_equal(ids1, ids0)
     np.testing.assert_array_equal(len1, 2)
