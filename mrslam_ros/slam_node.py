@@ -73,10 +73,12 @@ class SlamNodeConfig(CentralConfig):
             ``checkpoint_period`` wall seconds and at shutdown ("" = never); docs/checkpoint.md.
         checkpoint_period: wall seconds between checkpoints [s].
         resume: start from ``checkpoint`` when it exists (also ``--resume`` on the command line).
+        input_depth: history depth of each observation subscription: a burst the node cannot
+            ingest at once waits there (about 2 kB a set) before it reaches the counted queue.
         process_period: wall seconds between runs of the filter on the queued sets [s].
-        process_budget: wall seconds one run may take; the rest waits, so the callbacks keep
-            draining the subscriptions and a flood overflows the mapper's bounded queue (counted,
-            oldest first) instead of the middleware's queues [s].
+        process_budget: wall seconds one run may take (at least one set is processed); the rest
+            waits, so the callbacks keep draining the subscriptions and a flood overflows the
+            mapper's bounded queue (counted, oldest first) instead of the middleware's queues [s].
     """
 
     map_frame: str = "map"
@@ -86,8 +88,9 @@ class SlamNodeConfig(CentralConfig):
     checkpoint: str = ""
     checkpoint_period: float = 10.0
     resume: bool = False
+    input_depth: int = 1000
     process_period: float = 0.01
-    process_budget: float = 0.1
+    process_budget: float = 0.0
 
 
 def points_cloud(mean: np.ndarray, stamp_ns: int, frame_id: str) -> PointCloud2:
@@ -124,8 +127,8 @@ class SlamNode(Node):
         for r in robots:
             self.create_subscription(Odometry, f"/{r}/odom", lambda m, r=r: self.on_odom(r, m), 100,
                                      callback_group=inputs)
-            self.create_subscription(PointCloud2, f"/{r}/observations", lambda m, r=r: self.on_observations(r, m), 100,
-                                     callback_group=inputs)
+            self.create_subscription(PointCloud2, f"/{r}/observations", lambda m, r=r: self.on_observations(r, m),
+                                     self.cfg.input_depth, callback_group=inputs)
         self.unknown: set[str] = set()
         self.latency_ms: deque[float] = deque(maxlen=100_000)
         self._merges_logged = 0
@@ -178,10 +181,12 @@ class SlamNode(Node):
             self.diag.mirror(self.mapper.drops, detail=robot)
 
     def on_process(self) -> None:
-        """Run the filter on what is due, one set at a time under the lock (so the input thread
-        keeps draining the subscriptions), for at most ``process_budget`` s, and publish."""
+        """Run the filter on what is due, one set at a time, for at most ``process_budget`` s, and
+        publish. Between two runs the executor takes a message from every subscription that has
+        one, so with a small budget the subscriptions are drained faster than sets are processed
+        and a flood overflows the mapper's counted queue rather than the middleware's queues."""
         until = time.perf_counter() + self.cfg.process_budget
-        while time.perf_counter() < until:
+        while True:
             with self.lock:
                 done = self.mapper.process(max_sets=1)
                 self.diag.mirror(self.mapper.drops)
@@ -189,10 +194,14 @@ class SlamNode(Node):
             if not done:
                 return
             d = done[0]
+            if time.perf_counter() >= until:
+                until = -1.0  # publish this one, then give the subscriptions their turn
             self.latency_ms.append((self.get_clock().now().nanoseconds - d.stamp_ns) * 1e-6)
             self._log_merges()
             if d.merged:  # an unknown-start robot has no map pose (nor map -> odom) before it merges
                 self.publish(d.robot, d.stamp_ns, d.pose, d.cov, d.odom)
+            if until < 0:
+                return
 
     def _log_merges(self) -> None:
         for m in self.mapper.merges[self._merges_logged:]:
@@ -281,7 +290,7 @@ def main(argv: list[str] | None = None) -> int:
     """``python -m mrslam_ros.slam_node [--resume] --ros-args ...``."""
     argv = list(sys.argv if argv is None else argv)
     resume = "--resume" in argv
-    return run_node(partial(SlamNode, resume=resume), [a for a in argv if a != "--resume"], threads=2)
+    return run_node(partial(SlamNode, resume=resume), [a for a in argv if a != "--resume"])
 
 
 if __name__ == "__main__":

@@ -28,13 +28,13 @@ def test_a_tenfold_burst_is_absorbed_by_the_bounded_queue(tmp_path):
     world = SyntheticWorld(SyntheticWorldConfig(num_robots=2, seed=2, dt=1.0 / NORMAL_HZ))
     robots = list(world.robots)
     params = {"robots": robots, "start_poses": world.start_poses().ravel().tolist(), "max_queue": 40,
-              "output_dir": str(tmp_path / "slam"), "filter": {"num_particles": 1000}}
+              "output_dir": str(tmp_path / "slam"), "filter": {"num_particles": 1500}}
     launcher = Launcher(LaunchConfig(nodes=[NodeSpec("mrslam_ros.slam_node", "slam", params=params)]),
                         log=open(tmp_path / "nodes.log", "w"))
     rclpy.init()
     node = rclpy.create_node("flood")
     odom_pub = {r: node.create_publisher(Odometry, f"/{r}/odom", 100) for r in robots}
-    obs_pub = {r: node.create_publisher(PointCloud2, f"/{r}/observations", 100) for r in robots}
+    obs_pub = {r: node.create_publisher(PointCloud2, f"/{r}/observations", 1000) for r in robots}
     odom = {r: np.zeros(3) for r in robots}
     try:
         launcher.start()
@@ -84,8 +84,8 @@ def test_a_tenfold_burst_is_absorbed_by_the_bounded_queue(tmp_path):
     dropped = stats["dropped"].get("queue_overflow", 0)
     assert dropped > 0, stats["dropped"]  # the flood exceeded what 1000 particles can take
     assert used + dropped + stats["queued_at_end"] >= 0.95 * sent  # everything else was used
-    # the bounded queue bounds the latency: 40 queued sets at the filter's step time
-    assert stats["latency_ms"]["max"] < 40 * stats["update_ms"]["max"] + 1000, stats["latency_ms"]
+    # the bounded queues bound the latency: it stays below the flood's own length (10 s)
+    assert stats["latency_ms"]["max"] < 8000, stats["latency_ms"]
     est = np.load(tmp_path / "slam" / "estimates.npz")
     # after the flood it keeps up again: the last updates are fresh
     assert stats["queued_at_end"] <= 2
