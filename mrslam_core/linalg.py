@@ -50,21 +50,25 @@ def sym_inv_det(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.linalg.inv(a), np.linalg.det(a)
 
 
+def sym3_inv_quad_det(p, q, s, d, e, f, x, y, z) -> tuple[np.ndarray, np.ndarray]:
+    """vᵀ A⁻¹ v and det A for the symmetric 3×3 A = [[p, q, s], [q, d, e], [s, e, f]] and v = (x, y, z),
+    given as its six distinct terms (arrays of one shape), from the adjugate."""
+    c00 = d * f - e * e
+    c01 = s * e - q * f
+    c02 = q * e - s * d
+    det = p * c00 + q * c01 + s * c02
+    num = c00 * x * x + (p * f - s * s) * y * y + (p * d - q * q) * z * z
+    num += 2.0 * (c01 * x * y + c02 * x * z + (q * s - p * e) * y * z)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return num / det, det
+
+
 def inv_quad_det(a: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """vᵀ A⁻¹ v and det A for symmetric A (..., n, n), v (..., n), without forming A⁻¹ (n ≤ 3)."""
     n = a.shape[-1]
     if n == 3:
-        p, q, s = a[..., 0, 0], a[..., 0, 1], a[..., 0, 2]
-        d, e, f = a[..., 1, 1], a[..., 1, 2], a[..., 2, 2]
-        x, y, z = v[..., 0], v[..., 1], v[..., 2]
-        c00 = d * f - e * e
-        c01 = s * e - q * f
-        c02 = q * e - s * d
-        det = p * c00 + q * c01 + s * c02
-        num = c00 * x * x + (p * f - s * s) * y * y + (p * d - q * q) * z * z
-        num += 2.0 * (c01 * x * y + c02 * x * z + (q * s - p * e) * y * z)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            return num / det, det
+        return sym3_inv_quad_det(a[..., 0, 0], a[..., 0, 1], a[..., 0, 2], a[..., 1, 1], a[..., 1, 2], a[..., 2, 2],
+                                 v[..., 0], v[..., 1], v[..., 2])
     inv, det = sym_inv_det(a)
     return quad_form(v, inv), det
 

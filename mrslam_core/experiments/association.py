@@ -11,13 +11,13 @@
 from __future__ import annotations
 
 import argparse
-import json
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
 from mrslam_core.datasets.synthetic import SyntheticWorld, SyntheticWorldConfig
+from mrslam_core.experiments._output import write_tables
 from mrslam_core.slam.config import AssociationConfig, ExistenceConfig, FilterConfig
 from mrslam_core.slam.filter import MultiRobotFastSLAM
 
@@ -130,8 +130,5 @@ def main(argv: list[str]) -> int:
         lines.append(f"| {m} | {row['fastslam1']:.3f} | {row['fastslam2']:.3f} |")
         print(lines[-1], flush=True)
     text = "\n".join(lines)
-    print(text)
-    (out / "association.md").write_text(text + "\n")
-    (out / "association.json").write_text(json.dumps(results, indent=2))
-    print(f"wrote {out / 'association.md'}")
+    write_tables(out, "association", text, results)
     return 0

@@ -11,13 +11,12 @@
 from __future__ import annotations
 
 import argparse
-import json
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 
 from mrslam_core.datasets.synthetic import SyntheticWorld, SyntheticWorldConfig
+from mrslam_core.experiments._output import write_tables
 from mrslam_core.exploration.config import ExplorationConfig
 from mrslam_core.exploration.sim2d import TeamSim2D
 from mrslam_core.geometry.se2 import wrap_angle
@@ -126,10 +125,5 @@ def main(argv: list[str]) -> int:
     explore, lines = exploration_table(args.world, args.seeds, args.seconds)
     table2, lines2 = common_vs_dedicated(args.seeds, args.particles, 200)
     text = "\n".join(lines + [""] + lines2)
-    print(text)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "exploration.md").write_text(text + "\n")
-    (out / "exploration.json").write_text(json.dumps({"exploration": explore, "table2": table2}, indent=2))
-    print(f"wrote {out / 'exploration.md'}")
+    write_tables(args.out, "exploration", text, {"exploration": explore, "table2": table2})
     return 0

@@ -16,13 +16,12 @@ end-only map is reported (004: 69 % for fusion every 300 iterations).
 from __future__ import annotations
 
 import argparse
-import json
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 
 from mrslam_core.datasets.synthetic import SyntheticWorld, SyntheticWorldConfig
+from mrslam_core.experiments._output import write_tables
 from mrslam_core.fusion.config import FusionConfig
 from mrslam_core.fusion.join import try_join
 from mrslam_core.slam.config import FilterConfig
@@ -144,10 +143,5 @@ def main(argv: list[str]) -> int:
                 f"{100 * r['lower_of_changed_det']:.0f} % | {r['median_trace_ratio']:.2f} | {rm} |"
             )
     text = "\n".join(lines)
-    print(text)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "fusion_frequency.md").write_text(text + "\n")
-    (out / "fusion_frequency.json").write_text(json.dumps(results, indent=2))
-    print(f"wrote {out / 'fusion_frequency.md'}")
+    write_tables(args.out, "fusion_frequency", text, results)
     return 0

@@ -16,16 +16,15 @@ pose, and its ATE against Vicon from the merge to the end, next to the ATE of th
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from dataclasses import dataclass, field, replace
-from pathlib import Path
 
 import numpy as np
 
 from mrslam_core.datasets.mrclam import MrclamDataset, OdometryIntegrator
 from mrslam_core.evaluation.metrics import ate_rmse
+from mrslam_core.experiments._output import write_tables
 from mrslam_core.fusion.alignment import alignment_error, apply_transform, rigid_transform_2d
 from mrslam_core.fusion.config import FusionConfig
 from mrslam_core.fusion.join import try_join
@@ -323,10 +322,5 @@ def main(argv: list[str]) -> int:
                     f"{r['gauge_free_ate_m']:.3f} / {r['gauge_free_ate_known_start_m']:.3f} | {r['gauge_free_ratio']:.2f} |"
                 )
     text = "\n".join(lines)
-    print(text)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "fusion_mrclam.md").write_text(text + "\n")
-    (out / "fusion_mrclam.json").write_text(json.dumps({"runs": runs}, indent=2, default=float))
-    print(f"wrote {out / 'fusion_mrclam.md'}")
+    write_tables(args.out, "fusion_mrclam", text, {"runs": runs})
     return 0

@@ -10,11 +10,10 @@ by RANSAC, then made consistent by least squares (004 section 3.1).
 from __future__ import annotations
 
 import argparse
-import json
-from pathlib import Path
 
 import numpy as np
 
+from mrslam_core.experiments._output import write_tables
 from mrslam_core.fusion.alignment import alignment_error, apply_transform, ransac_align
 from mrslam_core.fusion.config import FusionConfig
 from mrslam_core.fusion.multimap import align_maps, compose_chain
@@ -126,10 +125,5 @@ def main(argv: list[str]) -> int:
                      f"{np.mean([d['opt_max_m'] for d in done]):.3f} (mean), {np.max([d['opt_max_m'] for d in done]):.3f} (max) | "
                      f"{np.mean([d['opt_max_deg'] for d in done]):.2f} (mean), {np.max([d['opt_max_deg'] for d in done]):.2f} (max) |")
     text = "\n".join(lines)
-    print(text)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "fusion_synthetic.md").write_text(text + "\n")
-    (out / "fusion_synthetic.json").write_text(json.dumps({"outliers": rows_out, "overlap": rows_ov, "loops": loops}, indent=2))
-    print(f"wrote {out / 'fusion_synthetic.md'}")
+    write_tables(args.out, "fusion_synthetic", text, {"outliers": rows_out, "overlap": rows_ov, "loops": loops})
     return 0

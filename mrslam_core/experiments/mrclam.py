@@ -8,14 +8,13 @@ per-robot ATE against Vicon next to dead reckoning.
 from __future__ import annotations
 
 import argparse
-import json
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 
 from mrslam_core.datasets.mrclam import MrclamDataset
 from mrslam_core.evaluation.report import robot_metrics
+from mrslam_core.experiments._output import write_tables
 from mrslam_core.pipelines.mrclam import MrclamConfig, run
 
 VARIANTS = {
@@ -69,10 +68,5 @@ def main(argv: list[str]) -> int:
         cells = [f"{m:.3f} ({x:.3f})" for m, x in zip(ate.mean(0), ate.max(0))]
         lines.append(f"| {name} | " + " | ".join(cells) + f" | {ate.mean():.3f} |")
     text = "\n".join(lines)
-    print(text)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "mrclam.md").write_text(text + "\n")
-    (out / "mrclam.json").write_text(json.dumps({"runs": table, "summary": summary}, indent=2))
-    print(f"wrote {out / 'mrclam.md'}")
+    write_tables(args.out, "mrclam", text, {"runs": table, "summary": summary})
     return 0

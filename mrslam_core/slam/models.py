@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from mrslam_core.geometry.se2 import wrap_angle
-from mrslam_core.linalg import quad_form, rotate_z_sym3, sym_inv_det
+from mrslam_core.linalg import quad_form, rotate_z_sym3, sym3_inv_quad_det, sym_inv_det
 
 LOG_2PI = float(np.log(2.0 * np.pi))
 
@@ -166,14 +166,9 @@ class StereoPointModel(ObservationModel):
         e = sig[..., 1, 2] + (s * rxz + c * ryz)
         f = sig[..., 2, 2] + r[..., 2, 2]
         x, y, zz = (lm[..., i] - mu[..., i] for i in range(3))
-        c00 = d * f - e * e
-        c01 = sx * e - q * f
-        c02 = q * e - sx * d
-        det = p * c00 + q * c01 + sx * c02
-        num = c00 * x * x + (p * f - sx * sx) * y * y + (p * d - q * q) * zz * zz
-        num += 2.0 * (c01 * x * y + c02 * x * zz + (q * sx - p * e) * y * zz)
+        m2, det = sym3_inv_quad_det(p, q, sx, d, e, f, x, y, zz)
         with np.errstate(divide="ignore", invalid="ignore"):
-            return num / det, 3 * LOG_2PI + np.log(det)
+            return m2, 3 * LOG_2PI + np.log(det)
 
     def update(self, pose, z, r, mu, sig):
         """The Kalman step with H = I in the map frame (see the class docstring), written out on
