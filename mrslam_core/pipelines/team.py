@@ -51,7 +51,7 @@ def _team_exploration() -> ExplorationConfig:
     # Slower than the 2D exploration defaults, for the 5 Hz stereo frontend (measured on the
     # office world, docs/results.md): turning at 1.2 rad/s moves the image 55 px per frame and
     # tracks rarely live the 3 frames an observation needs, and robots that graze obstacles see
-    # nothing (the camera's near limit is f·b/max_disparity = 0.43 m); such gaps let the particle
+    # nothing (the camera's near limit was f·b/max_disparity = 0.43 m, now 0.21 m); such gaps let the particle
     # cloud spread and re-acquire a wrong heading. 0.5 rad/s (23 px per frame), 0.35 m/s and
     # 0.4 m clearance halve the frames without observations (7 % -> 3 %).
     return ExplorationConfig(max_speed=0.35, max_turn_rate=0.5, robot_radius=0.4)
@@ -62,7 +62,9 @@ def _team_frontend() -> FrontendConfig:
     # buffer: disparity error σ 0.24 px (MAD) to 0.36 px (std) on smooth surfaces; Harris corners
     # sit on whole pixels (±0.5 px). σd = 0.5 px and σr = σc = 1 px keep a margin (000 uses
     # 1 and 10 px for a real head with calibration error).
-    return FrontendConfig(sigma_d=0.5, sigma_r=1.0, sigma_c=1.0)
+    # max_disparity 128 puts the near limit f·b/d at 0.21 m (64: 0.43 m): a robot facing a wall
+    # at the planner's 0.4 m clearance has its cameras 0.28 m from it and saw nothing with 64.
+    return FrontendConfig(sigma_d=0.5, sigma_r=1.0, sigma_c=1.0, max_disparity=128)
 
 
 @dataclass(frozen=True)

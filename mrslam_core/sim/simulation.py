@@ -26,7 +26,7 @@ import numpy as np
 import pybullet as p
 
 from mrslam_core.frontend.camera import CameraCalibration
-from mrslam_core.geometry.se2 import compose
+from mrslam_core.geometry.se2 import compose, wrap_angle
 from mrslam_core.sim import robot as robot_model
 from mrslam_core.sim.config import SimConfig
 from mrslam_core.sim.errors import SimError
@@ -34,6 +34,8 @@ from mrslam_core.sim.odometry import noisy_increment, true_increment
 from mrslam_core.sim.scene import build_scene
 from mrslam_core.sim.world import World, load_world
 
+#: deepest a robot may be pushed into an obstacle by one physics step before the step is undone [m]
+MAX_PENETRATION = 0.01
 _LUMA = np.array([77, 150, 29], np.uint16)  # ITU-R BT.601 weights ×256
 
 
@@ -222,20 +224,28 @@ class Simulation:
         return self.frames_due()
 
     def _physics_step(self) -> None:
-        """Acceleration limits, kinematic drive, contacts, then ground truth and odometry."""
+        """Acceleration limits, kinematic drive, contacts, then ground truth and odometry.
+
+        The wheels do not slip sideways: a robot moves along its heading or not at all. Driving
+        into an obstacle stops it (it does not slide along a wall, which no wheel odometry could
+        see), and what the contact solver does to a robot turning against an obstacle is kept
+        only along its heading; a step that would push it deeper than :data:`MAX_PENETRATION`
+        into an obstacle is not taken.
+        """
         d, dt, cid = self.config.drive, self._dt, self.client
+        depth = np.zeros(len(self._names))  # deepest contact at the current poses (negative: penetrating) [m]
         if self._names:
             lim = np.array([d.max_accel, d.max_turn_accel]) * dt
             self._vel = self._vel + np.clip(self._cmd - self._vel, -lim, lim)
             th = self._truth[:, 2]
-            for body, (v, w), c, s in zip(self._bodies, self._vel, np.cos(th), np.sin(th)):
+            for i, (body, (v, w), c, s) in enumerate(zip(self._bodies, self._vel, np.cos(th), np.sin(th))):
                 lin = np.array([v * c, v * s, 0.0])
-                # a wheel cannot push into an obstacle: drop the velocity component into each contact
                 for contact in p.getContactPoints(bodyA=body, physicsClientId=cid):
+                    depth[i] = min(depth[i], contact[8])
                     n = np.array([contact[7][0], contact[7][1], 0.0])  # normal on B, towards this body
                     if contact[8] < 0.005 and lin @ n < 0 and n @ n > 1e-6:
-                        n /= np.linalg.norm(n)
-                        lin -= (lin @ n) * n
+                        lin[:] = 0.0  # blocked: the wheels cannot push into the obstacle
+                        self._vel[i, 0] = 0.0
                 p.resetBaseVelocity(body, lin.tolist(), [0.0, 0.0, w], physicsClientId=cid)
         p.stepSimulation(physicsClientId=cid)
         self._time_ns += self._dt_ns
@@ -245,16 +255,34 @@ class Simulation:
         for i, body in enumerate(self._bodies):
             pos, orn = p.getBasePositionAndOrientation(body, physicsClientId=cid)
             yaw = p.getEulerFromQuaternion(orn)[2]
-            now[i] = pos[0], pos[1], yaw
-            # keep the robot on the floor and upright (contacts may lift or tilt it)
-            p.resetBasePositionAndOrientation(body, [pos[0], pos[1], 0.0], p.getQuaternionFromEuler([0, 0, yaw]),
-                                              physicsClientId=cid)
+            prev = self._truth[i]
+            mid = prev[2] + wrap_angle(yaw - prev[2]) / 2
+            h = np.array([np.cos(mid), np.sin(mid)])
+            now[i, :2] = prev[:2] + (h @ (np.array(pos[:2]) - prev[:2])) * h
+            now[i, 2] = yaw
+            self._place(body, now[i])
+        p.performCollisionDetection(physicsClientId=cid)
+        undone = False
+        for i, body in enumerate(self._bodies):
+            deep = min((c[8] for c in p.getContactPoints(bodyA=body, physicsClientId=cid)), default=0.0)
+            if deep < -MAX_PENETRATION and deep < depth[i] - 1e-4:
+                now[i] = self._truth[i]  # the step would push it deeper into an obstacle: not taken
+                self._place(body, now[i])
+                undone = True
+        if undone:  # the next step's contacts are those of the poses kept
+            p.performCollisionDetection(physicsClientId=cid)
         ds, dth = true_increment(self._truth, now)
         self._truth_twist = np.stack([ds, dth], axis=1) / dt
         inc = noisy_increment(ds, dth, self.config.odometry, d.track, self._rng)
         self._odom = compose(self._odom, inc)
         self._odom_twist = inc[:, [0, 2]] / dt
         self._truth = now
+
+    def _place(self, body: int, pose: np.ndarray) -> None:
+        """Put ``body`` at ``pose`` (x, y, θ) on the floor, upright, at rest."""
+        cid = self.client
+        p.resetBasePositionAndOrientation(body, [pose[0], pose[1], 0.0], p.getQuaternionFromEuler([0, 0, pose[2]]),
+                                          physicsClientId=cid)
 
     # ------------------------------------------------------------------ cameras
     def camera_extrinsic(self, side: str = "left") -> np.ndarray:

@@ -66,6 +66,27 @@ def test_robot_stops_at_a_wall_and_at_another_robot():
         assert sim.ground_truth("s")[0] < sim.ground_truth("r")[0] - 0.265 - BODY_FRONT + 0.03
 
 
+def test_wheels_do_not_slip_sideways_against_a_wall():
+    """Driving into the east wall at 50°, then turning on the spot against it: the robot stops
+    instead of sliding along the wall, and whatever it does stays along its heading, so noiseless
+    odometry equals the truth (a slide would be invisible to the wheels)."""
+    with Simulation(FAST) as sim:
+        sim.add_robot("r", np.array([5.0, 1.5, np.radians(50)]))
+        sim.set_command("r", 0.4, 0.0)
+        sim.run_until(int(5e9))  # 2 m of commands; the wall is ~1 m away along the heading
+        stopped = sim.ground_truth("r")
+        sim.run_until(int(8e9))
+        np.testing.assert_allclose(sim.ground_truth("r"), stopped, atol=0.002)
+        sim.set_command("r", 0.3, 0.8)  # keep pushing while turning towards the wall's normal
+        sim.run_until(int(12e9))
+        sim.set_command("r", -0.2, -0.5)
+        sim.run_until(int(16e9))
+        odom, _ = sim.odometry("r")
+        from mrslam_core.geometry.se2 import compose
+        np.testing.assert_allclose(compose(np.array([5.0, 1.5, np.radians(50)]), odom)[:2], sim.ground_truth("r")[:2], atol=0.01)
+        assert sim.ground_truth("r")[0] < 5.95 - 0.1
+
+
 def test_odometry_systematic_error():
     cfg = replace(FAST, odometry=replace(NO_NOISE, scale_error_left=0.02, scale_error_right=0.02))
     with Simulation(cfg) as sim:
