@@ -1,16 +1,18 @@
 """``mrslam experiment fusion_mrclam DIR``: MR.CLAM with robots whose start pose is unknown (issue 8).
 
 Robot 1 (the robots in ``known``) starts the central filter at its Vicon start pose; every other
-robot runs its own filter (K = 1) from its own origin, knowing nothing of the others. Every
-``try_every`` seconds each such robot's best map is aligned with the central best map (barcode
-descriptors, RANSAC, at least ``min_inliers`` inliers); when the alignment is accepted the robot's
-filter is joined into the central filter particle by particle (004 section 5) and from then on the
-robot is one more robot of the joint filter (its sightings of the other merged robots and theirs of
-it are scored from then on).
+robot runs its own filter (K = 1) from its own origin, knowing nothing of the others. A robot joins
+the central filter particle by particle (004 section 5) either by a rendezvous — in a step in which
+it and a robot of the central filter measure each other, which gives its pose in the common frame
+directly (:mod:`mrslam_core.fusion.rendezvous`) — or, every ``try_every`` seconds, by aligning its
+best map with the central best map (barcode descriptors, RANSAC, at least ``min_inliers``
+inliers). From then on it is one more robot of the joint filter (its sightings of the other merged
+robots and theirs of it are scored from then on).
 
-Reported per merged robot: the merge time, the alignment's error against the robot's true start
-pose, and its ATE against Vicon from the merge to the end, next to the ATE of the known-start run
-(:func:`mrslam_core.pipelines.mrclam.run` with the same config) over the SAME time window.
+Reported per merged robot: the merge time and how, the transform's error against the robot's true
+start pose, and its ATE against Vicon from the merge to the end, next to the ATE of the known-start
+run (:func:`mrslam_core.pipelines.mrclam.run` with the same config) over the SAME time window, both
+unaligned and after one SE(2) transform fitted to the whole team.
 """
 
 from __future__ import annotations
@@ -27,7 +29,9 @@ from mrslam_core.evaluation.metrics import ate_rmse
 from mrslam_core.experiments._output import write_tables
 from mrslam_core.fusion.alignment import alignment_error, apply_transform, rigid_transform_2d
 from mrslam_core.fusion.config import FusionConfig
+from mrslam_core.fusion.gauge import hold_gauge
 from mrslam_core.fusion.join import try_join
+from mrslam_core.fusion.rendezvous import join_by_rendezvous
 from mrslam_core.pipelines.mrclam import MrclamConfig, _bins, _one_hot
 from mrslam_core.pipelines.mrclam import run as run_known_start
 from mrslam_core.slam.config import FilterConfig
@@ -44,12 +48,12 @@ def _mrclam_fusion() -> FusionConfig:
     )
 
 
-def _fusion_filter() -> FilterConfig:
-    # The MR.CLAM filter of docs/results.md (issue 2 table), pinned: heading / position random
-    # walks 0.05 rad/√s and 0.005 m/√s, motion noise sampled every step, no re-localisation.
-    # With the later defaults (0.04 rad/√s, 0.02 m/√s, deferred motion noise, re-localisation)
-    # the unknown-start run degrades (first 300 s, M = 300: ATE after merge 1.2–2.3 m instead of
-    # 0.44–0.73 m; deferred noise alone accounts for most of it); see docs/fusion.md.
+def pinned_filter() -> FilterConfig:
+    """The MR.CLAM filter of docs/results.md's issue-2 table (heading / position random walks
+    0.05 rad/√s and 0.005 m/√s, motion noise sampled every step, no re-localisation), which this
+    experiment used before robots could join by rendezvous (``--filter pinned``). With map
+    alignment only, the later defaults (deferred motion noise, re-localisation) did worse; with
+    rendezvous joins they do better (docs/fusion.md)."""
     base = MrclamConfig().filter
     return replace(
         base,
@@ -64,16 +68,25 @@ class MrclamFusionConfig:
     """The unknown-start MR.CLAM run.
 
     Attributes:
-        mrclam: the filter run (the known-start run it is compared with uses the same).
+        mrclam: the filter run, by default the MR.CLAM defaults (the known-start run it is
+            compared with uses the same).
         fusion: alignment thresholds.
         known: robots whose start pose is known (they start the central filter).
         try_every: seconds between alignment attempts of each unmerged robot.
+        hold_gauge: while the central map is empty, hold the known robots' poses at their
+            weighted mean (:func:`mrslam_core.fusion.gauge.hold_gauge`), so the common frame is
+            their dead reckoning rather than one random draw of its noise.
+        rendezvous: also merge a robot as soon as it and a robot of the central filter measure
+            each other in the same step (:mod:`mrslam_core.fusion.rendezvous`), without waiting
+            for the maps to overlap.
     """
 
-    mrclam: MrclamConfig = field(default_factory=lambda: MrclamConfig(filter=_fusion_filter()))
+    mrclam: MrclamConfig = field(default_factory=MrclamConfig)
     fusion: FusionConfig = field(default_factory=_mrclam_fusion)
     known: tuple[int, ...] = (1,)
     try_every: float = 5.0
+    hold_gauge: bool = True
+    rendezvous: bool = True
 
 
 def run_unknown_start(ds: MrclamDataset, cfg: MrclamFusionConfig, progress: bool = False) -> dict:
@@ -156,9 +169,30 @@ def run_unknown_start(ds: MrclamDataset, cfg: MrclamFusionConfig, progress: bool
     for k in range(1, nsteps + 1):
         tic = time.perf_counter()
         ups = [u for i in in_central for u in updates_for(i, k, in_central)]
+        if cfg.hold_gauge:
+            hold_gauge(central)
         central.step(ups)
         for i, slam in local.items():
             slam.step(updates_for(i, k, [i]))
+        if cfg.rendezvous:
+            for i in list(local):
+                meet = mutual_sighting(per_step, k, i, in_central)
+                if meet is None:
+                    continue
+                j, z_ij, z_ji = meet
+                rv, joined = join_by_rendezvous(central, local[i], name[i], name[j], z_ij, z_ji, rr_cov, rr_cov, cfg.fusion)
+                dt, dth = alignment_error(rv.transform, starts[i])
+                merged[name[i]] = {
+                    "step": k, "time_s": float(times[k] - t0), "transform": rv.transform.tolist(), "via": f"rendezvous with {name[j]}",
+                    "inliers": int(joined.fused), "matches": int(joined.fused), "rmse_m": float("nan"),
+                    "start_error_m": dt, "start_error_deg": float(np.degrees(dth)),
+                    "fused": joined.fused, "added": joined.added, "dropped": joined.dropped,
+                }
+                del local[i]
+                in_central.append(i)
+                if progress:
+                    print(f"  merged {name[i]} at {times[k] - t0:.1f} s by rendezvous with {name[j]}, "
+                          f"start pose error {dt:.3f} m {np.degrees(dth):.2f}°", file=sys.stderr, flush=True)
         if k % every == 0:
             for i in list(local):
                 al, joined = try_join(central, local[i], cfg.fusion, name[i])
@@ -167,7 +201,7 @@ def run_unknown_start(ds: MrclamDataset, cfg: MrclamFusionConfig, progress: bool
                     continue
                 dt, dth = alignment_error(al.transform, starts[i])
                 merged[name[i]] = {
-                    "step": k, "time_s": float(times[k] - t0), "transform": al.transform.tolist(),
+                    "step": k, "time_s": float(times[k] - t0), "transform": al.transform.tolist(), "via": "map alignment",
                     "inliers": int(al.inliers.size), "matches": len(al.matches), "rmse_m": al.rmse,
                     "start_error_m": dt, "start_error_deg": float(np.degrees(dth)),
                     "fused": joined.fused, "added": joined.added, "dropped": joined.dropped,
@@ -188,6 +222,27 @@ def run_unknown_start(ds: MrclamDataset, cfg: MrclamFusionConfig, progress: bool
         "times": times, "est": est, "gt": {name[i]: ds.groundtruth(i, times) for i in robots},
         "merged": merged, "attempts": attempts, "update_ms": np.array(step_ms),
     }
+
+
+def mutual_sighting(
+    per_step: dict[int, dict[int, np.ndarray]], k: int, i: int, group: list[int]
+) -> tuple[int, np.ndarray, np.ndarray] | None:
+    """A robot j of ``group`` that robot i measured in step k and that measured i in the same step:
+    (j, i's last (range, bearing) of j, j's last of i), or None."""
+    mine = per_step[i].get(k)
+    if mine is None:
+        return None
+    for j in group:
+        seen = mine[mine[:, 1] == j]
+        if not len(seen):
+            continue
+        theirs = per_step[j].get(k)
+        if theirs is None:
+            continue
+        back = theirs[theirs[:, 1] == i]
+        if len(back):
+            return j, seen[-1, 2:4].copy(), back[-1, 2:4].copy()
+    return None
 
 
 def gauge_free(
@@ -260,10 +315,16 @@ def main(argv: list[str]) -> int:
     ap.add_argument("--pair-likelihood", action="store_true", help="weight joined pairs by their landmarks' agreement")
     ap.add_argument("--global-transform", action="store_true",
                     help="join every particle with the best maps' transform (no per-pair refit)")
+    ap.add_argument("--filter", choices=["current", "pinned"], default="current",
+                    help="MR.CLAM filter: current defaults, or the earlier pinned one (pinned_filter)")
+    ap.add_argument("--no-rendezvous", action="store_true", help="merge by map alignment only")
+    ap.add_argument("--no-hold-gauge", action="store_true", help="sample the known robots' noise before the first landmark")
     ap.add_argument("--out", default="runs/experiments")
     args = ap.parse_args(argv)
     ds = MrclamDataset(args.folder)
-    base = MrclamFusionConfig()
+    base = MrclamFusionConfig(rendezvous=not args.no_rendezvous, hold_gauge=not args.no_hold_gauge)
+    if args.filter == "pinned":
+        base = replace(base, mrclam=replace(base.mrclam, filter=pinned_filter()))
     if args.global_transform:
         base = replace(base, fusion=replace(base.fusion, per_particle_alignment=False))
     if args.pair_likelihood:
@@ -287,40 +348,45 @@ def main(argv: list[str]) -> int:
               f"{np.degrees(g[2]):.1f}°; known-start run: {np.degrees(res['gauge']['known_start'][2]):.1f}°", flush=True)
         for rname, r in res["robots"].items():
             m = res["merged"].get(rname)
-            extra = "" if m is None else (f", merged at {m['time_s']:.0f} s with {m['inliers']} inliers, "
+            extra = "" if m is None else (f", merged at {m['time_s']:.0f} s by {m['via']} ({m['fused']} landmarks fused), "
                                           f"start error {m['start_error_m']:.3f} m {m['start_error_deg']:.2f}°")
             if "ate_m" in r:
                 print(f"  {rname}: ATE after merge {r['ate_m']:.3f} m vs known start {r['ate_known_start_m']:.3f} m "
-                      f"(ratio {r['ratio']:.2f}); gauge-free {r['gauge_free_ate_m']:.3f} vs "
+                      f"(ratio {r['ratio']:.2f}); team-aligned {r['gauge_free_ate_m']:.3f} vs "
                       f"{r['gauge_free_ate_known_start_m']:.3f} m{extra}", flush=True)
             else:
                 print(f"  {rname}: never merged; last reason: {res['attempts'][rname][-1:]}", flush=True)
     names = list(runs[0]["robots"])
     lines = [
-        (f"MR.CLAM {args.folder}, robots {list(base.known)} known start, others unknown; "
-        f"M = {mc.filter.num_particles}, {args.seeds} seed(s); ATE RMSE [m] from the merge to the end"),
+        (f"MR.CLAM {args.folder}, robots {list(base.known)} known start, others unknown; filter {args.filter}, "
+         f"rendezvous {'on' if base.rendezvous else 'off'}, hold gauge {'on' if base.hold_gauge else 'off'}; "
+         f"M = {mc.filter.num_particles}, {args.seeds} seed(s); ATE RMSE [m] from the merge to the end, "
+         "both runs over the same window. Unaligned = map frame as estimated (the bound applies to it); "
+         "team-aligned = after ONE SE(2) transform fitted to all robots' post-merge positions jointly, per run"),
         "",
-        "| seed | robot | merged at [s] | inliers | start-pose error [m] / [°] | ATE unknown start | ATE known start (same window) | ratio | gauge-free: unknown / known | ratio |",
-        "|---|---|---|---|---|---|---|---|---|---|",
+        "| seed | robot | merged at [s] by | fused landmarks | start-pose error [m] / [°] | unaligned ATE: unknown / known start | ratio | team-aligned ATE: unknown / known | ratio |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
+    worst = []
     for seed, res in enumerate(runs):
         g = res["gauge"]
-        lines.append(f"| {seed} | team frame rotation (fitted) | | | | {np.degrees(g['unknown_start'][2]):.1f}° | "
+        lines.append(f"| {seed} | team frame (fitted) | | | | rotation {np.degrees(g['unknown_start'][2]):.1f}° / "
                      f"{np.degrees(g['known_start'][2]):.1f}° | | | |")
         for rname in names:
             r, m = res["robots"][rname], res["merged"].get(rname)
             if m is None and "ate_m" not in r:
-                lines.append(f"| {seed} | {rname} | never | | | | {r['ate_known_start_full_m']:.3f} (full) | |")
-            elif m is None:
-                lines.append(f"| {seed} | {rname} | known start | | | {r['ate_m']:.3f} | {r['ate_known_start_m']:.3f} | "
-                             f"{r['ratio']:.2f} | {r['gauge_free_ate_m']:.3f} / {r['gauge_free_ate_known_start_m']:.3f} | "
-                             f"{r['gauge_free_ratio']:.2f} |")
+                lines.append(f"| {seed} | {rname} | never | | | – / {r['ate_known_start_full_m']:.3f} (full) | | | |")
+                continue
+            worst.append(r["ratio"])
+            pair = (f"{r['ate_m']:.3f} / {r['ate_known_start_m']:.3f} | {r['ratio']:.2f} | "
+                    f"{r['gauge_free_ate_m']:.3f} / {r['gauge_free_ate_known_start_m']:.3f} | {r['gauge_free_ratio']:.2f} |")
+            if m is None:
+                lines.append(f"| {seed} | {rname} | known start | | | {pair}")
             else:
-                lines.append(
-                    f"| {seed} | {rname} | {m['time_s']:.0f} | {m['inliers']} | {m['start_error_m']:.3f} / "
-                    f"{m['start_error_deg']:.2f} | {r['ate_m']:.3f} | {r['ate_known_start_m']:.3f} | {r['ratio']:.2f} | "
-                    f"{r['gauge_free_ate_m']:.3f} / {r['gauge_free_ate_known_start_m']:.3f} | {r['gauge_free_ratio']:.2f} |"
-                )
+                lines.append(f"| {seed} | {rname} | {m['time_s']:.0f} {m.get('via', '')} | {m['fused']} | "
+                             f"{m['start_error_m']:.3f} / {m['start_error_deg']:.1f} | {pair}")
+    lines += ["", (f"Unaligned ratio over all robots and seeds: max {max(worst):.2f}, median {np.median(worst):.2f}; "
+                   f"{sum(w <= 1.5 for w in worst)} of {len(worst)} within 1.5.")]
     text = "\n".join(lines)
     write_tables(args.out, "fusion_mrclam", text, {"runs": runs})
     return 0

@@ -5,7 +5,10 @@ own origin. When its landmark map overlaps the central map, the two are aligned 
 (:mod:`.alignment`: descriptor matches, RANSAC, least-squares refinement), more than two maps are
 made globally consistent (:mod:`.multimap`), matched landmarks are fused with the stationary Kalman
 step (:mod:`.kalman`), and the robot is brought into the central filter particle by particle
-(:mod:`.join`). Pure numpy/scipy: no rclpy.
+(:mod:`.join`). A robot can also be brought in from a mutual sighting with a robot already in the
+central filter (:mod:`.rendezvous`), and while the central map is still empty the known robots are
+held at their posterior mean so that the common frame is not a random draw of their motion noise
+(:mod:`.gauge`). Pure numpy/scipy: no rclpy.
 
 Frame convention everywhere in this package: an alignment ``(tx [m], ty [m], θ [rad])`` maps a
 point of the SOURCE map into the TARGET map, ``p_target = R(θ)·p_source + t`` (z unchanged). It is

@@ -114,6 +114,21 @@ def transform_covariance(transform: np.ndarray, src: np.ndarray, dst: np.ndarray
     return sigma2 * np.linalg.inv(jtj)
 
 
+def transform_cramer_rao(transform: np.ndarray, src: np.ndarray, sigma: float) -> np.ndarray:
+    """Cramér–Rao covariance (3, 3) of (tx, ty, θ) fitted to N correct matches whose source points
+    are ``src`` (N, 2+) [m], when both maps hold each point with isotropic noise σ [m] per
+    coordinate: each residual R·s + t − d has covariance 2σ²I, so C = 2σ² (JᵀJ)⁻¹ with J as in
+    :func:`transform_covariance` (translation at the source origin). The least-squares fit is
+    the maximum-likelihood estimate for this noise, so its error e should give eᵀC⁻¹e ~ χ²(3)."""
+    src = np.asarray(src, float)[:, :2]
+    c, s = np.cos(transform[2]), np.sin(transform[2])
+    jac = np.zeros((src.shape[0], 2, 3))
+    jac[:, 0, 0] = jac[:, 1, 1] = 1.0
+    jac[:, 0, 2] = -s * src[:, 0] - c * src[:, 1]
+    jac[:, 1, 2] = c * src[:, 0] - s * src[:, 1]
+    return 2 * sigma**2 * np.linalg.inv(np.einsum("nki,nkj->ij", jac, jac))
+
+
 def apply_transform(transform: np.ndarray, pts: np.ndarray) -> np.ndarray:
     """Planar points (..., N, 2+) moved by transforms (..., 3); returns (..., N, 2)."""
     t = np.asarray(transform, float)

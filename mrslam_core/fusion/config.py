@@ -51,6 +51,16 @@ class FusionConfig:
         per_particle_alignment: when joining, refit the transform for each (central particle,
             local particle) pair on its own copies of the inlier landmarks (004 section 5 fuses
             particle by particle; one transform from the best maps fits only the best particle).
+        join_pose_sigma: (σx [m], σy [m], σθ [rad]) of independent Gaussian noise given to the
+            joined robot's pose in each joined particle, on top of the local particle's pose
+            moved by its transform, and added to the drift covariance it joins with: for a local
+            filter that is confidently wrong about where the robot stands in its own map
+            (MR.CLAM: up to 25° off at the join with a particle spread of 2°), so that the robot's
+            next observations of the common map can pick the right pose. (0, 0, 0): the local
+            pose as it is. On MR.CLAM it did not help (docs/fusion.md), so it is off there.
+        carry_landmarks: when joining, fuse the matched local landmarks into the common map and
+            add the local-only ones (004 section 4); False joins the robot's pose only and lets
+            it map again in the common filter (tried on MR.CLAM, not better; docs/fusion.md).
     """
 
     descriptor_threshold: float = 0.5
@@ -73,6 +83,8 @@ class FusionConfig:
     residual_variance_scale: float = 0.0
     transform_sampling_scale: float = 0.0
     per_particle_alignment: bool = True
+    join_pose_sigma: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    carry_landmarks: bool = True
 
     def __post_init__(self) -> None:
         if self.ransac_iterations < 1 or self.refine_iterations < 0:
@@ -91,5 +103,7 @@ class FusionConfig:
             raise ValueError("pair_likelihood_temper must be in (0, 1]")
         if self.residual_variance_scale < 0 or self.transform_sampling_scale < 0:
             raise ValueError("residual_variance_scale and transform_sampling_scale must be >= 0")
+        if len(self.join_pose_sigma) != 3 or min(self.join_pose_sigma) < 0:
+            raise ValueError("join_pose_sigma must be three values >= 0")
         if self.z_variance <= 0:
             raise ValueError("z_variance must be > 0")

@@ -203,11 +203,17 @@ def join_filters(
     central.log_w = normalise_log_weights(pair_ll)
     stamp = local.last_stamp.get(local.robots[kl])
     drift, pending = _moved_pose_covariances(local, kl, t, transform_cov if pose_cov is None else pose_cov)
-    central.add_robot(name, compose(t_all, local.poses[anc_l, kl]), stamp, drift, pending)
+    joined = compose(t_all, local.poses[anc_l, kl])
+    sigma = np.asarray(config.join_pose_sigma, float)
+    if sigma.any():
+        joined = joined + central.rng.standard_normal((m, 3)) * sigma
+        spread = np.diag(sigma**2)
+        drift = spread if drift is None else drift + spread
+    central.add_robot(name, joined, stamp, drift, pending)
 
     rows = np.arange(m)[:, None]
     slot_map = np.full(ls_store.size, -1, np.int64)
-    if len(pairs):
+    if len(pairs) and config.carry_landmarks:
         mc, sc, ec, nc, scc = cs_store.gather(rows, cs[None], ("mean", "cov", "exists", "count", "score"))
         ml, sl, el, nl, scl = ls_store.gather(anc_l[:, None], ls[None], ("mean", "cov", "exists", "count", "score"))
         ml, sl = move_landmarks(t_all, ml.astype(float), sl.astype(float), extra_variance)
@@ -242,11 +248,14 @@ def join_filters(
         dropped = int(np.isin(rest, drop[~skip[drop]]).sum())
         skip[drop] = True
     rest = rest[~skip[rest]]
-    if rest.size:
+    if rest.size and config.carry_landmarks:
         mean, cov, ex, cnt = ls_store.gather(anc_l[:, None], rest[None])
         mean, cov = move_landmarks(t_all, mean.astype(float), cov.astype(float), extra_variance)
         slot_map[rest] = central.insert_landmarks(mean, cov, ex, ls_store.descriptor[rest], cnt)
         cs_store.origin[slot_map[rest]] = ls_store.origin[rest]  # the creating track ids
+    if not config.carry_landmarks:
+        return JoinResult(name, t.copy(), 0, 0, int(rest.size + len(pairs)) + dropped,
+                          np.column_stack([anc_c, anc_l]), slot_map, t_all)
     return JoinResult(name, t.copy(), len(pairs), int(rest.size), dropped,
                       np.column_stack([anc_c, anc_l]), slot_map, t_all)
 

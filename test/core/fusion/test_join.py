@@ -195,3 +195,31 @@ def test_robot_with_unknown_start_joins_the_team_filter():
     assert "do not overlap" in reasons[0]  # the early attempts fail for the right reason
     assert central.robots == ["robot1", "robot2"] and central.num_particles == 40
     assert np.sqrt(np.mean(np.square(err))) < 0.15, err  # 0.035 m measured
+
+
+def test_join_pose_sigma_spreads_the_joined_robot_around_its_moved_pose():
+    central = MultiRobotFastSLAM(FilterConfig(num_particles=4000, seed=3), ["a"], np.zeros((1, 3)))
+    local = MultiRobotFastSLAM(FilterConfig(num_particles=4, seed=4), ["b"], np.zeros((1, 3)))
+    local.poses[:, 0] = np.random.default_rng(5).normal(0, 1, (4, 3))
+    sigma = np.array([0.3, 0.2, 0.1])
+    res = join_filters(central, local, T, np.zeros((0, 2)), FusionConfig(join_pose_sigma=tuple(sigma)))
+    d = central.poses[:, 1] - compose(T, local.poses[res.ancestors[:, 1], 0])
+    d[:, 2] = wrap_angle(d[:, 2])
+    np.testing.assert_allclose(d.std(0), sigma, rtol=0.05)
+    assert np.all(np.abs(d.mean(0)) < 4 * sigma / np.sqrt(4000))
+    # the spread is part of the drift the robot enters with (none in the local filter here)
+    np.testing.assert_allclose(central.drift_cov[1], np.diag(sigma**2), atol=1e-15)
+
+
+def test_without_carrying_landmarks_only_the_robot_joins():
+    central, local = hand_filters(6)
+    size = central.landmarks.size
+    c_lm = central.landmarks.gather(np.arange(6)[:, None], np.arange(size)[None], ("mean", "cov", "exists"))
+    res = join_filters(central, local, T, np.array([[0, 0], [1, 1]]), FusionConfig(carry_landmarks=False))
+    ic, il = res.ancestors.T
+    assert central.robots == ["a", "b"] and central.landmarks.size == size
+    assert res.fused == 0 and res.added == 0 and res.dropped == 4  # 2 matched + 2 local-only left out
+    after = central.landmarks.gather(np.arange(6)[:, None], np.arange(size)[None], ("mean", "cov", "exists"))
+    for a, b in zip(after, c_lm):
+        np.testing.assert_array_equal(a, b[ic])
+    np.testing.assert_allclose(central.poses[:, 1], compose(T, local.poses[il, 0]), atol=1e-12)

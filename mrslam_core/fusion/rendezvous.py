@@ -1,0 +1,130 @@
+"""Merging a robot by a rendezvous: two robots that measure each other (issue 8).
+
+When robot i (not merged, its own frame) measures robot j (already in the common filter) at range
+r and bearing β_ij, and j measures i at bearing β_ji at about the same time, the pose of j in i's
+body frame is fully determined without any landmark:
+
+    position (r cos β_ij, r sin β_ij),   heading θ_j − θ_i = β_ij + π − β_ji,
+
+so i's pose in the common frame is x_j ⊕ (that relative pose)⁻¹, and the local frame → common frame
+transform is T = x_i,map ⊕ x_i,local⁻¹. The robot is then joined particle by particle as after a map
+alignment (:func:`mrslam_core.fusion.join.join_filters`), each joined particle drawing its own
+transform from N(T, Cov T) (Cov T from the sightings' noise and j's pose covariance), so the joint
+filter's next sightings and landmark observations weigh them. Local landmarks whose barcode /
+descriptor matches a common landmark within ``inlier_distance`` after T are fused, the other
+matched ones are dropped (``source_outliers = drop``) or kept, the rest added, as for a map join.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from mrslam_core.fusion.alignment import apply_transform, match_descriptors
+from mrslam_core.fusion.config import FusionConfig
+from mrslam_core.fusion.join import JoinResult, join_filters
+from mrslam_core.fusion.maps import LandmarkMap
+from mrslam_core.geometry.se2 import compose, inverse, wrap_angle
+from mrslam_core.slam.filter import MultiRobotFastSLAM
+
+
+@dataclass(frozen=True)
+class Rendezvous:
+    """A mutual sighting and what it implies.
+
+    Attributes:
+        relative: (3,) pose of the seen robot j in the seeing robot i's body frame (x [m], y [m], θ [rad]).
+        relative_cov: (3, 3) its covariance.
+        transform: (3,) local frame of i → common frame.
+        transform_cov: (3, 3) its covariance (sightings plus j's pose covariance).
+    """
+
+    relative: np.ndarray
+    relative_cov: np.ndarray
+    transform: np.ndarray
+    transform_cov: np.ndarray
+
+
+def relative_pose(z_ij: np.ndarray, z_ji: np.ndarray, cov_ij: np.ndarray, cov_ji: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Pose of j in i's body frame from i's measurement of j (range [m], bearing [rad]) and j's of i.
+
+    The range is the inverse-variance mean of both ranges; the heading is β_ij + π − β_ji.
+
+    Returns:
+        ((3,) relative pose, (3, 3) covariance by first-order propagation).
+    """
+    z_ij, z_ji = np.asarray(z_ij, float), np.asarray(z_ji, float)
+    vi, vj = cov_ij[0, 0], cov_ji[0, 0]
+    r = (z_ij[0] / vi + z_ji[0] / vj) / (1 / vi + 1 / vj)
+    var_r = 1.0 / (1 / vi + 1 / vj)
+    b = z_ij[1]
+    rel = np.array([r * np.cos(b), r * np.sin(b), wrap_angle(b + np.pi - z_ji[1])])
+    # inputs (r, β_ij, β_ji) -> (x, y, θ)
+    jac = np.array([[np.cos(b), -r * np.sin(b), 0.0], [np.sin(b), r * np.cos(b), 0.0], [0.0, 1.0, -1.0]])
+    cov_in = np.diag([var_r, cov_ij[1, 1], cov_ji[1, 1]])
+    return rel, jac @ cov_in @ jac.T
+
+
+def rendezvous_transform(
+    x_j: np.ndarray, cov_j: np.ndarray, x_i_local: np.ndarray, rel: np.ndarray, rel_cov: np.ndarray
+) -> Rendezvous:
+    """The local frame → common frame transform of robot i from j's common-frame pose ``x_j`` (3,)
+    with covariance ``cov_j``, i's local pose ``x_i_local`` and the relative pose of j in i's frame.
+
+    x_i = x_j ⊕ rel⁻¹ and T = x_i ⊕ x_i,local⁻¹; Cov T by first-order propagation of x_j and rel
+    (numerical Jacobians; i's local pose is taken as exact: its own uncertainty stays in its
+    local particles).
+    """
+    def f(v: np.ndarray) -> np.ndarray:
+        xi = compose(v[:3], inverse(v[3:]))
+        return compose(xi, inverse(x_i_local))
+
+    v0 = np.concatenate([np.asarray(x_j, float), np.asarray(rel, float)])
+    t = f(v0)
+    jac = np.zeros((3, 6))
+    for n in range(6):
+        d = np.zeros(6)
+        d[n] = 1e-6
+        diff = f(v0 + d) - f(v0 - d)
+        diff[2] = wrap_angle(diff[2])
+        jac[:, n] = diff / 2e-6
+    cov_in = np.zeros((6, 6))
+    cov_in[:3, :3] = cov_j
+    cov_in[3:, 3:] = rel_cov
+    return Rendezvous(np.asarray(rel, float), rel_cov, t, jac @ cov_in @ jac.T)
+
+
+def join_by_rendezvous(
+    central: MultiRobotFastSLAM, local: MultiRobotFastSLAM, robot: str, seen: str,
+    z_ij: np.ndarray, z_ji: np.ndarray, cov_ij: np.ndarray, cov_ji: np.ndarray, config: FusionConfig,
+) -> tuple[Rendezvous, JoinResult]:
+    """Join ``local`` (robot ``robot``, its own frame) into ``central`` from a mutual sighting with
+    ``seen`` (a robot of ``central``): ``z_ij`` is robot's measurement of seen, ``z_ji`` seen's of
+    robot (range [m], bearing [rad]) with covariances ``cov_ij``, ``cov_ji``.
+
+    Landmarks: descriptor matches between the two best maps whose positions agree within
+    ``config.inlier_distance`` after the rendezvous transform are fused; other matches follow
+    ``config.source_outliers``.
+    """
+    est_c, est_l = central.estimate(), local.estimate()
+    j = central.index[seen]
+    rel, rel_cov = relative_pose(z_ij, z_ji, cov_ij, cov_ji)
+    rv = rendezvous_transform(est_c.mean[j], est_c.cov[j], est_l.mean[0], rel, rel_cov)
+    target = LandmarkMap.from_filter(central, z_variance=config.z_variance)
+    source = LandmarkMap.from_filter(local, z_variance=config.z_variance)
+    pairs = np.zeros((0, 2), np.int64)
+    drop = None
+    if len(target.means) and len(source.means):
+        matches = match_descriptors(target.descriptors, source.descriptors, config.descriptor_threshold, config.mutual)
+        if len(matches):
+            moved = apply_transform(rv.transform, source.means[matches[:, 1], :2])
+            ok = np.linalg.norm(moved - target.means[matches[:, 0], :2], axis=1) <= config.inlier_distance
+            pairs = np.column_stack([target.ids[matches[ok, 0]], source.ids[matches[ok, 1]]])
+            if config.source_outliers == "drop":
+                drop = source.ids[matches[~ok, 1]]
+    res = join_filters(
+        central, local, rv.transform, pairs, config, robot, drop, 0.0, rv.transform_cov, per_pair=False,
+        pose_cov=rv.transform_cov,
+    )
+    return rv, res

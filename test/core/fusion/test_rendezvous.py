@@ -1,0 +1,72 @@
+"""Merging a robot from a mutual sighting (rendezvous): exact geometry and the join.
+
+Frames: body x forward, y left; bearing = atan2(Δy, Δx) − θ; a transform (tx, ty, θ) moves the
+local frame into the common frame, p_common = R·p_local + t.
+"""
+
+import numpy as np
+
+from mrslam_core.fusion.config import FusionConfig
+from mrslam_core.fusion.rendezvous import join_by_rendezvous, relative_pose, rendezvous_transform
+from mrslam_core.geometry.se2 import between, compose, inverse, wrap_angle
+from mrslam_core.slam.config import FilterConfig
+from mrslam_core.slam.filter import MultiRobotFastSLAM
+
+COV = np.diag([0.25**2, 0.04**2])
+
+
+def range_bearing(frm: np.ndarray, to: np.ndarray) -> np.ndarray:
+    d = to[:2] - frm[:2]
+    return np.array([np.hypot(*d), wrap_angle(np.arctan2(d[1], d[0]) - frm[2])])
+
+
+def test_mutual_sighting_gives_the_relative_pose_exactly():
+    x_i, x_j = np.array([1.0, 2.0, 2.5]), np.array([-0.5, 4.0, -1.2])  # headings beyond ±π/2
+    rel, cov = relative_pose(range_bearing(x_i, x_j), range_bearing(x_j, x_i), COV, COV)
+    np.testing.assert_allclose(rel, between(x_i, x_j), atol=1e-12)
+    # heading variance = both bearings' variances; range variance halves with two readings
+    assert cov[2, 2] == np.float64(2 * 0.04**2)
+    r = np.hypot(*(x_j[:2] - x_i[:2]))
+    np.testing.assert_allclose(np.linalg.eigvalsh(cov[:2, :2]).max(), max(0.25**2 / 2, r**2 * 0.04**2), rtol=1e-9)
+
+
+def test_rendezvous_transform_recovers_the_local_frame():
+    t_true = np.array([3.0, -1.0, 2.2])  # local frame -> common frame
+    x_i, x_j = np.array([2.0, 1.0, 0.3]), np.array([4.0, 2.5, -2.0])  # common frame
+    x_i_local = compose(inverse(t_true), x_i)
+    rel, rel_cov = relative_pose(range_bearing(x_i, x_j), range_bearing(x_j, x_i), COV, COV)
+    rv = rendezvous_transform(x_j, np.diag([0.01, 0.01, 0.001]), x_i_local, rel, rel_cov)
+    np.testing.assert_allclose(rv.transform, t_true, atol=1e-12)
+    # its covariance holds j's pose covariance and the sightings' heading variance at least
+    assert rv.transform_cov[2, 2] >= 0.001 + 2 * 0.04**2 - 1e-12
+    assert np.all(np.linalg.eigvalsh(rv.transform_cov) > 0)
+
+
+def test_join_by_rendezvous_places_the_robot_and_fuses_the_landmark_it_shares():
+    t_true = np.array([-2.0, 3.0, -0.7])
+    x_j, x_i = np.array([1.0, 1.0, 0.4]), np.array([3.0, 2.0, 2.9])
+    central = MultiRobotFastSLAM(FilterConfig(num_particles=400, seed=1), ["a"], x_j[None])
+    central.poses[:, 0] = x_j  # exactly known
+    local = MultiRobotFastSLAM(FilterConfig(num_particles=10, seed=2), ["b"], np.zeros((1, 3)))
+    local.poses[:, 0] = compose(inverse(t_true), x_i)
+    eye = np.eye(3, dtype=np.float32)
+    # a landmark both mapped (descriptor e0), and one only the local robot mapped (e2)
+    lm_common = np.array([5.0, 5.0, 0.0])
+    central.insert_landmarks(np.broadcast_to(lm_common, (400, 1, 3)).copy(),
+                             np.broadcast_to(np.eye(3) * 0.01, (400, 1, 3, 3)).copy(), np.ones((400, 1), bool), eye[:1])
+    lm_local = np.stack([compose(inverse(t_true), np.r_[lm_common[:2], 0.0]), compose(inverse(t_true), np.array([0.0, 6.0, 0.0]))])
+    lm_local[:, 2] = 0.0
+    local.insert_landmarks(np.broadcast_to(lm_local, (10, 2, 3)).copy(),
+                           np.broadcast_to(np.eye(3) * 0.01, (10, 2, 3, 3)).copy(), np.ones((10, 2), bool), eye[[0, 2]])
+    cfg = FusionConfig(inlier_distance=0.5, source_outliers="drop")
+    rv, res = join_by_rendezvous(central, local, "b", "a", range_bearing(x_i, x_j), range_bearing(x_j, x_i), COV, COV, cfg)
+    np.testing.assert_allclose(rv.transform, t_true, atol=1e-9)
+    assert central.robots == ["a", "b"] and res.fused == 1 and res.added == 1
+    # each particle drew its own transform from N(T, Cov T): the robot is spread around the truth
+    p = central.poses[:, 1]
+    assert np.linalg.norm(p[:, :2].mean(0) - x_i[:2]) < 0.05
+    assert abs(wrap_angle(np.arctan2(np.sin(p[:, 2]).mean(), np.cos(p[:, 2]).mean()) - x_i[2])) < 0.02
+    assert 0.02 < np.degrees(p[:, 2].std()) < 10
+    # the local-only landmark arrives near its true common-frame position (spread by the transforms)
+    mean, ex = central.landmarks.gather(np.arange(400)[:, None], res.slot_map[1:2][None], ("mean", "exists"))
+    assert ex.all() and np.linalg.norm(mean[:, 0, :2].mean(0) - np.array([0.0, 6.0])) < 0.1
