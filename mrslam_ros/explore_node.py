@@ -103,6 +103,7 @@ class ExploreNode(Node):
             goal = self.explorer.goals.get(robot)
             if goal is not None:
                 msg = PoseStamped()
+                msg.header.stamp = self.get_clock().now().to_msg()
                 msg.header.frame_id = self.cfg.map_frame
                 msg.pose = pose_to_msg(np.array([goal.target[0], goal.target[1], 0.0]))
                 self.goal_pub[robot].publish(msg)

@@ -55,6 +55,10 @@ class ExplorationConfig:
         return_to_start: drive back to the start pose once exploration is complete.
         max_speed, max_turn_rate: path follower limits [m/s, rad/s].
         lookahead: pure-pursuit lookahead distance [m].
+        unknown_passable: paths and travel costs may cross cells never observed (right for a
+            sensor that sees every obstacle before the robot reaches it). False: only cells
+            observed free (for stereo cameras, which cannot see a wall nearer than their near
+            limit and would otherwise plan through it once they stand close to it).
     """
 
     coordinated: bool = True
@@ -77,3 +81,4 @@ class ExplorationConfig:
     max_speed: float = 0.5
     max_turn_rate: float = 1.2
     lookahead: float = 0.4
+    unknown_passable: bool = True

@@ -30,6 +30,27 @@ class Goal:
     assigned_s: float
 
 
+def planning_layers(grid: OccupancyGrid, poses: list[np.ndarray], cfg: ExplorationConfig) -> tuple[np.ndarray, np.ndarray]:
+    """What paths may cross: (passable (H, W) bool for A*, occupancy (H, W) for the travel cost).
+
+    Obstacles are inflated by ``robot_radius``. Without ``unknown_passable`` only cells observed
+    free are passable and unobserved ones cost like obstacles, except within the robot's radius
+    (+ 2 cells) of a robot's pose (x, y, θ): the ground under and just around a robot is never in
+    view, and it must be able to leave it.
+    """
+    prob = grid.probability()
+    passable = ~inflate(grid.occupied(), cfg.robot_radius / grid.res)
+    if not cfg.unknown_passable:
+        rr, cc = np.ogrid[: grid.shape[0], : grid.shape[1]]
+        around = np.zeros(grid.shape, bool)
+        for pose in poses:
+            r0, c0 = np.clip(grid.cell_of(np.asarray(pose)[:2]), 0, np.array(grid.shape) - 1)
+            around |= (rr - r0) ** 2 + (cc - c0) ** 2 <= (cfg.robot_radius / grid.res + 2) ** 2
+        passable &= grid.free() | (around & ~grid.occupied())
+        prob = np.where(grid.observed | around, prob, 1.0)
+    return passable, prob
+
+
 @dataclass
 class Explorer:
     """Coordinated frontier exploration for robots ``robots`` (002 section V).
@@ -53,13 +74,12 @@ class Explorer:
 
     def _replan(self, grid: OccupancyGrid, poses: dict[str, np.ndarray], now: float) -> None:
         cfg = self.config
-        prob = grid.probability()
         free, known = grid.free(), grid.observed
         frontier = frontier_cells(free, known)
         self.plans += 1
         self.last_plan_s = now
         self.known_at_plan = int(grid.observed.sum())
-        passable = ~inflate(grid.occupied(), cfg.robot_radius / grid.res)
+        passable, prob = planning_layers(grid, [poses[n] for n in self.robots], cfg)
         frontier &= passable  # a frontier the robot cannot stand on (hugging a wall) is not a goal
         waiting = False  # a frontier blocked only for now will be tried again: not complete yet
         if self.blacklist:

@@ -34,14 +34,17 @@ from mrslam_core.slam.filter import MultiRobotFastSLAM, RobotUpdate
 def _team_filter() -> FilterConfig:
     # The motion model matches the simulator's default odometry errors (002 Table I): variance
     # 1.25e-3 m²/m per translation component, 5.5e-3 rad²/m and 1.7e-3 rad²/rad of heading;
-    # the proportional terms cover the systematic wheel-scale and track errors.
+    # alpha2 covers the heading drift of the wheel-scale difference (0.03 rad/m), var_theta_per_rad
+    # the track error. alpha1 = 0: Thrun's alpha1·rot1² gave a robot that moved a few mm sideways
+    # (rot1 near ±π/2) 0.2 rad of heading noise in one step, and the joint resampling then walked
+    # its heading several degrees while it saw nothing (replays of recorded runs, docs/results.md).
     # E0 = 0.25 instead of 0.5: measured against the rendered truth, 14 % of the associations
     # joined points more than 0.3 m apart with E0 = 0.5 (U-SURF look-alikes on the textures),
     # 6-7 % with 0.25.
     return FilterConfig(
         num_particles=300,
         proposal="fastslam2",
-        motion=MotionConfig(alpha1=0.01, alpha2=0.001, alpha3=0.001, alpha4=0.0, min_translation=0.005,
+        motion=MotionConfig(alpha1=0.0, alpha2=0.001, alpha3=0.001, alpha4=0.0, min_translation=0.005,
                             var_xy_per_m=1.25e-3, var_theta_per_m=5.5e-3, var_theta_per_rad=1.75e-3),
         association=AssociationConfig(descriptor_gate=0.25),
     )

@@ -105,3 +105,34 @@ def test_grid_from_the_frontends_obstacle_scan():
     grid = OccupancyGrid(GridConfig(resolution=0.1, size=(4.0, 4.0), origin=(-2.0, -2.0)))
     grid.insert(np.zeros(3), scan)
     assert grid.occupied().sum() == 1 and grid.free().sum() > 20
+
+
+@pytest.mark.parametrize("unknown_passable", [True, False])
+def test_paths_through_unobserved_cells_only_where_allowed(unknown_passable):
+    """Observed free: a U from the robot at (0.5, 0.5) east along y = 0.5, north along x = 5.5
+    and back west along y = 3.5 to (0.5, 3.5); the straight way north (x = 0.5) was never
+    observed. A stereo robot must not plan through it (a wall there would be invisible to it once
+    it stands close); a sensor that sees every wall may."""
+    from mrslam_core.exploration.explorer import planning_layers
+
+    grid = OccupancyGrid(GridConfig(resolution=0.1, size=(6.0, 4.0), origin=(0.0, 0.0)))
+    free = np.zeros(grid.shape, bool)
+    free[1:10, 1:59] = True  # rows are y: y 0.1-1.0
+    free[1:39, 50:59] = True  # x 5.0-5.9
+    free[30:39, 1:59] = True  # y 3.0-3.9
+    grid.observed[free] = True
+    grid.logodds[free] = -3.0
+    cfg = ExplorationConfig(robot_radius=0.2, unknown_passable=unknown_passable)
+    robot = np.array([0.5, 0.5, 0.0])
+    passable, prob = planning_layers(grid, [robot], cfg)
+    start, goal = tuple(grid.cell_of(robot[:2])), tuple(grid.cell_of(np.array([0.5, 3.5])))
+    path = np.array(astar(passable, start, goal))
+    xy = grid.centre_of(path)
+    if unknown_passable:
+        assert len(path) == 31 and xy[:, 0].max() < 0.6  # straight north
+        assert prob[20, 5] == 0.5
+    else:
+        assert xy[:, 0].max() > 4.9  # round the U
+        far = np.linalg.norm(xy - robot[:2], axis=1) > cfg.robot_radius + 0.2
+        assert grid.observed[tuple(path[far].T)].all()  # seen cells only, beyond the robot's own surroundings
+        assert prob[20, 5] == 1.0 and prob[6, 6] < 0.1  # unobserved costs like an obstacle
