@@ -164,6 +164,21 @@ def run_unknown_start(ds: MrclamDataset, cfg: MrclamFusionConfig, progress: bool
             t_prev = tb
         return out
 
+    def record(i: int, k: int, transform: np.ndarray, joined, via: str, inliers: int, matches: int, rmse: float) -> None:
+        """Robot i joined the central filter at step k: log it and move it out of ``local``."""
+        dt, dth = alignment_error(transform, starts[i])
+        merged[name[i]] = {
+            "step": k, "time_s": float(times[k] - t0), "transform": np.asarray(transform).tolist(), "via": via,
+            "inliers": inliers, "matches": matches, "rmse_m": rmse,
+            "start_error_m": dt, "start_error_deg": float(np.degrees(dth)),
+            "fused": joined.fused, "added": joined.added, "dropped": joined.dropped,
+        }
+        del local[i]
+        in_central.append(i)
+        if progress:
+            print(f"  merged {name[i]} at {times[k] - t0:.1f} s by {via} ({inliers} inliers), "
+                  f"start pose error {dt:.3f} m {np.degrees(dth):.2f}°", file=sys.stderr, flush=True)
+
     step_ms = []
     report_every = max(nsteps // 10, 1)
     for k in range(1, nsteps + 1):
@@ -181,36 +196,14 @@ def run_unknown_start(ds: MrclamDataset, cfg: MrclamFusionConfig, progress: bool
                     continue
                 j, z_ij, z_ji = meet
                 rv, joined = join_by_rendezvous(central, local[i], name[i], name[j], z_ij, z_ji, rr_cov, rr_cov, cfg.fusion)
-                dt, dth = alignment_error(rv.transform, starts[i])
-                merged[name[i]] = {
-                    "step": k, "time_s": float(times[k] - t0), "transform": rv.transform.tolist(), "via": f"rendezvous with {name[j]}",
-                    "inliers": int(joined.fused), "matches": int(joined.fused), "rmse_m": float("nan"),
-                    "start_error_m": dt, "start_error_deg": float(np.degrees(dth)),
-                    "fused": joined.fused, "added": joined.added, "dropped": joined.dropped,
-                }
-                del local[i]
-                in_central.append(i)
-                if progress:
-                    print(f"  merged {name[i]} at {times[k] - t0:.1f} s by rendezvous with {name[j]}, "
-                          f"start pose error {dt:.3f} m {np.degrees(dth):.2f}°", file=sys.stderr, flush=True)
+                record(i, k, rv.transform, joined, f"rendezvous with {name[j]}", int(joined.fused), int(joined.fused), float("nan"))
         if k % every == 0:
             for i in list(local):
                 al, joined = try_join(central, local[i], cfg.fusion, name[i])
                 if joined is None:
                     attempts[name[i]].append(f"{times[k] - t0:.1f} s: {al.reason}")
                     continue
-                dt, dth = alignment_error(al.transform, starts[i])
-                merged[name[i]] = {
-                    "step": k, "time_s": float(times[k] - t0), "transform": al.transform.tolist(), "via": "map alignment",
-                    "inliers": int(al.inliers.size), "matches": len(al.matches), "rmse_m": al.rmse,
-                    "start_error_m": dt, "start_error_deg": float(np.degrees(dth)),
-                    "fused": joined.fused, "added": joined.added, "dropped": joined.dropped,
-                }
-                del local[i]
-                in_central.append(i)
-                if progress:
-                    print(f"  merged {name[i]} at {times[k] - t0:.1f} s: {al.inliers.size} inliers, "
-                          f"start pose error {dt:.3f} m {np.degrees(dth):.2f}°", file=sys.stderr, flush=True)
+                record(i, k, al.transform, joined, "map alignment", int(al.inliers.size), len(al.matches), al.rmse)
         step_ms.append((time.perf_counter() - tic) * 1e3)
         e = central.estimate()
         poses = e.mean if mc.estimate == "mean" else e.poses

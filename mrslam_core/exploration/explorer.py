@@ -30,6 +30,13 @@ class Goal:
     assigned_s: float
 
 
+def surroundings(grid: OccupancyGrid, xy: np.ndarray, robot_radius: float) -> np.ndarray:
+    """(H, W) bool: the cells within ``robot_radius`` [m] + 2 cells of the robot at ``xy`` (2,) [m]."""
+    r0, c0 = np.clip(grid.cell_of(xy), 0, np.array(grid.shape) - 1)
+    rr, cc = np.ogrid[: grid.shape[0], : grid.shape[1]]
+    return (rr - r0) ** 2 + (cc - c0) ** 2 <= (robot_radius / grid.res + 2) ** 2
+
+
 def planning_layers(grid: OccupancyGrid, poses: list[np.ndarray], cfg: ExplorationConfig) -> tuple[np.ndarray, np.ndarray]:
     """What paths may cross: (passable (H, W) bool for A*, occupancy (H, W) for the travel cost).
 
@@ -41,11 +48,9 @@ def planning_layers(grid: OccupancyGrid, poses: list[np.ndarray], cfg: Explorati
     prob = grid.probability()
     passable = ~inflate(grid.occupied(), cfg.robot_radius / grid.res)
     if not cfg.unknown_passable:
-        rr, cc = np.ogrid[: grid.shape[0], : grid.shape[1]]
         around = np.zeros(grid.shape, bool)
         for pose in poses:
-            r0, c0 = np.clip(grid.cell_of(np.asarray(pose)[:2]), 0, np.array(grid.shape) - 1)
-            around |= (rr - r0) ** 2 + (cc - c0) ** 2 <= (cfg.robot_radius / grid.res + 2) ** 2
+            around |= surroundings(grid, np.asarray(pose)[:2], cfg.robot_radius)
         passable &= grid.free() | (around & ~grid.occupied())
         prob = np.where(grid.observed | around, prob, 1.0)
     return passable, prob
@@ -125,8 +130,7 @@ class Explorer:
         goal = tuple(np.clip(grid.cell_of(target), 0, np.array(grid.shape) - 1))
         # a robot standing closer than its radius to an obstacle may leave through inflated
         # cells around it (never through occupied ones)
-        rr, cc = np.ogrid[: grid.shape[0], : grid.shape[1]]
-        near = (rr - start[0]) ** 2 + (cc - start[1]) ** 2 <= (self.config.robot_radius / grid.res + 2) ** 2
+        near = surroundings(grid, poses[name][:2], self.config.robot_radius)
         path = astar(passable | (near & ~grid.occupied()), start, goal)
         if path is None:
             self._strike(np.asarray(target, float), now)
