@@ -39,6 +39,9 @@ class BagPlayer:
         clock_hz: ``/clock`` messages per second of wall time between bag messages.
         wait_for_subscribers: seconds to wait, before the first message, until every topic of
             the bag has at least one matched subscription (0: start at once).
+        start_delay: seconds to wait after that, publishing ``/clock`` at the bag's start: a
+            publisher that has matched a subscription can still be unknown to that subscription
+            for a moment (DDS discovery is two-sided), and what it publishes then is lost.
 
     Raises:
         BagError: not a bag, a bad rate, or a topic whose message type is not importable.
@@ -46,7 +49,7 @@ class BagPlayer:
 
     def __init__(self, node, path: str | Path, rate: float = 1.0, loop: bool = False,
                  topics: Iterable[str] | None = None, clock: bool = True, clock_hz: float = 50.0,
-                 wait_for_subscribers: float = 0.0):
+                 wait_for_subscribers: float = 0.0, start_delay: float = 0.0):
         from rosgraph_msgs.msg import Clock
 
         from mrslam_ros.qos import CLOCK, from_bag_qos
@@ -64,6 +67,7 @@ class BagPlayer:
         self.topics = sorted(wanted)
         self.clock_hz = float(clock_hz)
         self.wait_for_subscribers = float(wait_for_subscribers)
+        self.start_delay = float(start_delay)
         self.published: Counter[str] = Counter()
         self.loops = 0
         self._stop = False
@@ -111,6 +115,9 @@ class BagPlayer:
         """
         if self.wait_for_subscribers > 0:
             self._wait_for_subscribers()
+        if self.start_delay > 0:
+            self.publish_clock(self.info.start_ns)
+            self._sleep_until(time.monotonic() + self.start_delay, lambda _: self.info.start_ns)
         per_pass = sum(self.info.topics[t].count for t in self.topics)
         total = 0
         while not self._stop:
@@ -160,6 +167,8 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
     ap.add_argument("--clock-hz", type=float, default=50.0, help="/clock rate between messages (wall Hz)")
     ap.add_argument("--wait", type=float, default=2.0,
                     help="seconds to wait for subscribers of every topic before playing (default 2)")
+    ap.add_argument("--delay", type=float, default=0.5,
+                    help="seconds to wait after that before the first message (default 0.5)")
     ap.add_argument("--offline", action="store_true", help="feed the bag straight into the core (no ROS)")
     ap.add_argument("--out", help="run folder (with --offline; default <bag>_offline)")
     ap.add_argument("--config", help="central node parameters (with --offline; default slam.yaml beside the bag)")
@@ -190,7 +199,8 @@ def main(argv: list[str]) -> int:
     node = rclpy.create_node("mrslam_replay")
     try:
         player = BagPlayer(node, args.bag, rate=args.rate, loop=args.loop, topics=args.topics,
-                           clock=not args.no_clock, clock_hz=args.clock_hz, wait_for_subscribers=args.wait)
+                           clock=not args.no_clock, clock_hz=args.clock_hz, wait_for_subscribers=args.wait,
+                           start_delay=args.delay)
         print(f"mrslam replay: {info.count} messages on {len(info.topics)} topics, {info.duration_s:.1f} s "
               f"({info.storage}), rate {args.rate:g}{', looping' if args.loop else ''}", flush=True)
         n = player.run()

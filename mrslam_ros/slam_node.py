@@ -34,6 +34,7 @@ from geometry_msgs.msg import PoseArray, PoseWithCovarianceStamped
 from nav_msgs.msg import Odometry, Path as PathMsg
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.clock import Clock, ClockType
+from rclpy.exceptions import InvalidHandle
 from rclpy.node import Node
 from sensor_msgs.msg import PointCloud2
 from tf2_msgs.msg import TFMessage
@@ -124,11 +125,12 @@ class SlamNode(Node):
         self.cloud_pub = self.create_publisher(PointCloud2, "/slam/landmarks", 1)
         self.marker_pub = self.create_publisher(MarkerArray, "/slam/landmark_markers", 1)
         self.particle_pub = self.create_publisher(PoseArray, "/slam/particles", 1)
-        for r in robots:
-            self.create_subscription(Odometry, f"/{r}/odom", lambda m, r=r: self.on_odom(r, m), 100,
-                                     callback_group=inputs)
-            self.create_subscription(PointCloud2, f"/{r}/observations", lambda m, r=r: self.on_observations(r, m),
-                                     self.cfg.input_depth, callback_group=inputs)
+        #: input subscriptions, odometry first: :meth:`drain` empties them in this order
+        self.inputs = [self.create_subscription(Odometry, f"/{r}/odom", lambda m, r=r: self.on_odom(r, m), 100,
+                                                callback_group=inputs) for r in robots]
+        self.inputs += [self.create_subscription(PointCloud2, f"/{r}/observations",
+                                                 lambda m, r=r: self.on_observations(r, m),
+                                                 self.cfg.input_depth, callback_group=inputs) for r in robots]
         self.unknown: set[str] = set()
         self.latency_ms: deque[float] = deque(maxlen=100_000)
         self._merges_logged = 0
@@ -181,11 +183,11 @@ class SlamNode(Node):
             self.diag.mirror(self.mapper.drops, detail=robot)
 
     def on_process(self) -> None:
-        """Run the filter on what is due, one set at a time, for at most ``process_budget`` s, and
-        publish. Between two runs the executor takes a message from every subscription that has
-        one, so with a small budget the subscriptions are drained faster than sets are processed
-        and a flood overflows the mapper's counted queue rather than the middleware's queues."""
+        """Take every waiting input (:meth:`drain`), then run the filter on what is due, one set at
+        a time, for at most ``process_budget`` s, and publish. A flood overflows the mapper's
+        counted queue rather than the middleware's queues."""
         until = time.perf_counter() + self.cfg.process_budget
+        self.drain()
         while True:
             with self.lock:
                 done = self.mapper.process(max_sets=1)
@@ -202,6 +204,25 @@ class SlamNode(Node):
                 self.publish(d.robot, d.stamp_ns, d.pose, d.cov, d.odom)
             if until < 0:
                 return
+
+    def drain(self) -> None:
+        """Hand every message waiting in the input subscriptions to its callback, odometry first.
+
+        The executor takes one message per subscription per cycle and a filter step runs in
+        between; in a flood the sets would wait in the middleware's queue (``input_depth``) and
+        the latency would grow to that queue's length. Taken here, they reach the mapper, whose
+        bounded queue drops the oldest and counts them.
+        """
+        for sub in self.inputs:
+            for _ in range(self.cfg.input_depth):
+                try:
+                    with sub.handle:
+                        got = sub.handle.take_message(sub.msg_type, sub.raw)
+                except InvalidHandle:  # destroyed at shutdown
+                    return
+                if got is None:
+                    break
+                sub.callback(got[0])
 
     def _log_merges(self) -> None:
         for m in self.mapper.merges[self._merges_logged:]:

@@ -84,11 +84,11 @@ def test_a_tenfold_burst_is_absorbed_by_the_bounded_queue(tmp_path):
     dropped = stats["dropped"].get("queue_overflow", 0)
     assert dropped > 0, stats["dropped"]  # the flood exceeded what 1000 particles can take
     assert used + dropped + stats["queued_at_end"] >= 0.95 * sent  # everything else was used
-    # the latency stays below the flood's own length (10 s). The mapper's queue (40 sets) does not
-    # bound it alone: rclpy takes one message per subscription per executor cycle and a filter step
-    # runs in between, so during the flood sets also wait in the subscription queue (depth 1000);
-    # measured 5.0 s on a quiet machine, 9.2-12.8 s with other jobs on both cores (docs/reliability.md)
-    assert stats["latency_ms"]["max"] < 10_000, (stats["latency_ms"], stats["update_ms"])
+    # the bounded queue bounds the latency: the node takes every waiting message before each
+    # filter step, so a set waits at most for the 40 queued ahead of it, each taking about a
+    # filter step (p95 measured in this run: a loaded machine moves the bound with it)
+    bound_ms = 1.5 * 40 * stats["update_ms"]["p95"] + 1000.0
+    assert stats["latency_ms"]["max"] < min(bound_ms, 10_000), (stats["latency_ms"], stats["update_ms"])
     est = np.load(tmp_path / "slam" / "estimates.npz")
     # after the flood it keeps up again: the last updates are fresh
     assert stats["queued_at_end"] <= 2
