@@ -91,6 +91,10 @@ def _convert(value: Any, typ: Any, key: str) -> Any:
 def from_dict(cls: type[T], data: dict[str, Any] | None, prefix: str = "") -> T:
     """Build dataclass ``cls`` from a nested mapping; absent keys take the field defaults.
 
+    A nested section that gives only some keys keeps the rest of the field's own default (the
+    parent's ``default_factory``, which may differ from the nested class's defaults): a team
+    config's ``filter: {seed: 1}`` changes the seed of the team's filter, nothing else.
+
     Raises:
         ConfigError: on an unknown key, a missing required key, or a value of the wrong type.
     """
@@ -113,7 +117,12 @@ def from_dict(cls: type[T], data: dict[str, Any] | None, prefix: str = "") -> T:
     for name, field in fields.items():
         key = prefix + name
         if name in data:
-            kwargs[name] = _convert(data[name], hints[name], key)
+            value = data[name]
+            if isinstance(value, dict):
+                default = field.default_factory() if field.default_factory is not dataclasses.MISSING else field.default
+                if dataclasses.is_dataclass(default) and not isinstance(default, type):
+                    value = _overlay(to_dict(default), value)
+            kwargs[name] = _convert(value, hints[name], key)
         elif field.default is dataclasses.MISSING and field.default_factory is dataclasses.MISSING:
             raise ConfigError(f"missing required key {key}")
     try:
@@ -122,6 +131,14 @@ def from_dict(cls: type[T], data: dict[str, Any] | None, prefix: str = "") -> T:
         if isinstance(exc, ConfigError):
             raise
         raise ConfigError(f"{prefix or 'config'}: {exc}") from exc
+
+
+def _overlay(base: dict, over: dict) -> dict:
+    """``base`` with the keys of ``over`` put in, nested mappings key by key."""
+    out = dict(base)
+    for k, v in over.items():
+        out[k] = _overlay(out[k], v) if isinstance(v, dict) and isinstance(out.get(k), dict) else v
+    return out
 
 
 def to_dict(obj: Any) -> Any:

@@ -210,3 +210,29 @@ def test_non_string_keys_are_named():
         from_dict(TeamConfig, {"filter": {1: 2}})
     with pytest.raises(ConfigError, match="key None is a NoneType"):
         from_dict(TeamConfig, {None: 2})
+
+
+@pytest.mark.parametrize("case", list(CASES))
+@SETTINGS
+@given(pick=st.integers(0, 10_000))
+def test_a_key_left_out_of_a_section_keeps_the_parents_default(case, pick):
+    """Leaving a key out of a nested section gives the value the whole config has by default,
+    even where the parent's default for the section differs from the section class's own."""
+    cls, data = fresh(case)
+    leaves = [x for x in walk(cls, data) if x[0] == "leaf" and len(x[2]) > 1 and all(isinstance(k, str) for k in x[2])]
+    if not leaves:
+        return
+    _, _, path, _, _ = leaves[pick % len(leaves)]
+    put(data, path, delete=True)
+    got = to_dict(from_dict(cls, data))
+    want = to_dict(from_dict(cls, {}))
+    for k in path:
+        got, want = got[k], want[k]
+    assert got == want, path
+
+
+def test_a_partial_team_filter_section_keeps_the_team_filter():
+    cfg = from_dict(TeamConfig, {"filter": {"seed": 7}, "exploration": {"stall_time": 0.0}})
+    assert cfg.filter.seed == 7 and cfg.exploration.stall_time == 0.0
+    assert cfg.filter == dataclasses.replace(TeamConfig().filter, seed=7)  # not FilterConfig(seed=7)
+    assert cfg.exploration == dataclasses.replace(TeamConfig().exploration, stall_time=0.0)
