@@ -31,7 +31,7 @@ from mrslam_core.fusion.alignment import alignment_error, apply_transform, rigid
 from mrslam_core.fusion.config import FusionConfig
 from mrslam_core.fusion.gauge import hold_gauge
 from mrslam_core.fusion.join import try_join
-from mrslam_core.fusion.rendezvous import join_by_rendezvous
+from mrslam_core.fusion.rendezvous import RendezvousGate, join_rendezvous, sighting_transform
 from mrslam_core.pipelines.mrclam import MrclamConfig, _bins, _one_hot
 from mrslam_core.pipelines.mrclam import run as run_known_start
 from mrslam_core.slam.config import FilterConfig
@@ -138,6 +138,7 @@ def run_unknown_start(ds: MrclamDataset, cfg: MrclamFusionConfig, progress: bool
     merged: dict[str, dict] = {}
     attempts: dict[str, list[str]] = {name[i]: [] for i in local}
     every = max(round(cfg.try_every / mc.step_period), 1)
+    gate = RendezvousGate.from_config(cfg.fusion)
 
     def updates_for(i: int, k: int, group: list[int]) -> list[RobotUpdate]:
         m = per_step[i].get(k, np.zeros((0, 4)))
@@ -195,7 +196,11 @@ def run_unknown_start(ds: MrclamDataset, cfg: MrclamFusionConfig, progress: bool
                 if meet is None:
                     continue
                 j, z_ij, z_ji = meet
-                rv, joined = join_by_rendezvous(central, local[i], name[i], name[j], z_ij, z_ji, rr_cov, rr_cov, cfg.fusion)
+                rv = sighting_transform(central, local[i], name[j], z_ij, z_ji, rr_cov, rr_cov)
+                if gate.offer(name[i], float(times[k] - t0), name[j], rv) is None:
+                    attempts[name[i]].append(gate.log[name[i]][-1])
+                    continue
+                joined = join_rendezvous(central, local[i], name[i], rv, cfg.fusion)
                 record(i, k, rv.transform, joined, f"rendezvous with {name[j]}", int(joined.fused), int(joined.fused), float("nan"))
         if k % every == 0:
             for i in list(local):

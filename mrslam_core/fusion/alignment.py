@@ -88,6 +88,20 @@ def rigid_transform_2d(src: np.ndarray, dst: np.ndarray, weights: np.ndarray | N
     return np.stack([tx, ty, theta], -1)
 
 
+def transform_jacobian(transform: np.ndarray, pts: np.ndarray) -> np.ndarray:
+    """Jacobian (..., N, 2, 3) of R(θ)·p + t with respect to (tx, ty, θ) at points (..., N, 2+)
+    [m]: [I₂ | ∂R/∂θ·p] (translation at the source origin)."""
+    t = np.asarray(transform, float)
+    pts = np.asarray(pts, float)
+    c = np.cos(t[..., 2])[..., None]
+    s = np.sin(t[..., 2])[..., None]
+    jac = np.zeros(pts.shape[:-1] + (2, 3))
+    jac[..., 0, 0] = jac[..., 1, 1] = 1.0
+    jac[..., 0, 2] = -s * pts[..., 0] - c * pts[..., 1]
+    jac[..., 1, 2] = c * pts[..., 0] - s * pts[..., 1]
+    return jac
+
+
 def transform_covariance(transform: np.ndarray, src: np.ndarray, dst: np.ndarray) -> np.ndarray:
     """Covariance (3, 3) of a fitted transform (tx, ty, θ) from its N >= 2 residuals.
 
@@ -100,16 +114,9 @@ def transform_covariance(transform: np.ndarray, src: np.ndarray, dst: np.ndarray
     n = src.shape[0]
     if n < 2 or 2 * n - 3 <= 0:
         return np.full((3, 3), np.nan)
-    c, s = np.cos(transform[2]), np.sin(transform[2])
     res = apply_transform(transform, src) - dst
-    dof = 2 * n - 3
-    if dof == 0:
-        return np.full((3, 3), np.nan)
-    sigma2 = float((res**2).sum() / dof)
-    jac = np.zeros((n, 2, 3))
-    jac[:, 0, 0] = jac[:, 1, 1] = 1.0
-    jac[:, 0, 2] = -s * src[:, 0] - c * src[:, 1]
-    jac[:, 1, 2] = c * src[:, 0] - s * src[:, 1]
+    sigma2 = float((res**2).sum() / (2 * n - 3))
+    jac = transform_jacobian(transform, src)
     jtj = np.einsum("nki,nkj->ij", jac, jac)
     return sigma2 * np.linalg.inv(jtj)
 
@@ -120,13 +127,29 @@ def transform_cramer_rao(transform: np.ndarray, src: np.ndarray, sigma: float) -
     coordinate: each residual R·s + t − d has covariance 2σ²I, so C = 2σ² (JᵀJ)⁻¹ with J as in
     :func:`transform_covariance` (translation at the source origin). The least-squares fit is
     the maximum-likelihood estimate for this noise, so its error e should give eᵀC⁻¹e ~ χ²(3)."""
+    jac = transform_jacobian(transform, np.asarray(src, float)[:, :2])
+    return 2 * sigma**2 * np.linalg.inv(np.einsum("nki,nkj->ij", jac, jac))
+
+
+def transform_information_covariance(
+    transform: np.ndarray, src: np.ndarray, cov_src: np.ndarray, cov_dst: np.ndarray
+) -> np.ndarray:
+    """Cramér–Rao covariance (3, 3) of (tx, ty, θ) from N >= 2 correct matches whose landmarks
+    carry their own covariances: residual rᵢ = R·sᵢ + t − dᵢ has covariance
+    Sᵢ = Σ_dst,i + R·Σ_src,i·Rᵀ (x, y block), so C = (Σ Jᵢᵀ Sᵢ⁻¹ Jᵢ)⁻¹ (the general form of
+    :func:`transform_cramer_rao`; translation at the source origin).
+
+    Args:
+        transform: (3,) source → target.
+        src: (N, 2+) source points [m]; cov_src, cov_dst: (N, 2+, 2+) their covariances [m²].
+    """
     src = np.asarray(src, float)[:, :2]
     c, s = np.cos(transform[2]), np.sin(transform[2])
-    jac = np.zeros((src.shape[0], 2, 3))
-    jac[:, 0, 0] = jac[:, 1, 1] = 1.0
-    jac[:, 0, 2] = -s * src[:, 0] - c * src[:, 1]
-    jac[:, 1, 2] = c * src[:, 0] - s * src[:, 1]
-    return 2 * sigma**2 * np.linalg.inv(np.einsum("nki,nkj->ij", jac, jac))
+    r = np.array([[c, -s], [s, c]])
+    cov = np.asarray(cov_dst, float)[:, :2, :2] + r @ np.asarray(cov_src, float)[:, :2, :2] @ r.T
+    jac = transform_jacobian(transform, src)
+    info = np.einsum("nki,nkl,nlj->ij", jac, np.linalg.inv(cov), jac)
+    return np.linalg.inv(info)
 
 
 def apply_transform(transform: np.ndarray, pts: np.ndarray) -> np.ndarray:

@@ -61,6 +61,33 @@ class FusionConfig:
         carry_landmarks: when joining, fuse the matched local landmarks into the common map and
             add the local-only ones (004 section 4); False joins the robot's pose only and lets
             it map again in the common filter (tried on MR.CLAM, not better; docs/fusion.md).
+        transform_uncertainty: how the alignment's covariance Cov T enters the join. ``drift``:
+            only added (propagated to the robot's pose) to the drift covariance the robot joins
+            with. ``proposal``: also added to its pending motion covariance, so with deferred
+            motion noise and the FastSLAM 2.0 proposal each particle's pose is drawn at the
+            robot's next landmark observation from its joined pose widened by Cov T and
+            corrected by the common map; and every local landmark moved into the common frame
+            gets J_T·Cov T·J_Tᵀ on its x, y covariance (its position depends on T, so the fusion
+            does not trust the moved copy over the common one more than T allows).
+        transform_cov_source: Cov T used by ``transform_uncertainty``: ``residuals`` (σ² from
+            the inliers' residuals, :func:`~mrslam_core.fusion.alignment.transform_covariance`),
+            ``landmarks`` (from the inlier landmarks' own covariances, Σ_target + R·Σ_source·Rᵀ
+            per pair, :func:`~mrslam_core.fusion.alignment.transform_information_covariance`), or
+            ``larger`` (whichever has the larger trace after propagation to the robot's pose).
+        max_join_pose_sigma: largest standard deviation [m] of the joined robot's position
+            that the alignment alone may cause (√tr of Cov T propagated to the robot's local
+            pose, Cov T from ``transform_cov_source``); an alignment above it is refused as
+            ill-conditioned (few inliers close together, far from the robot: a small rotation
+            error moves the robot a lot) and tried again later. None: no such check.
+        min_pair_spread: in the per-pair refit, a (central, local) pair whose own copies of the
+            matched landmarks lie within this RMS distance [m] of their centroid (or that holds
+            fewer than two of them) uses the alignment's transform instead: two landmarks a
+            few centimetres apart do not fix the rotation. None: ``min_spread``.
+        rendezvous_window: seconds within which a second mutual sighting must confirm the first
+            before a robot joins by rendezvous (:class:`~mrslam_core.fusion.rendezvous.RendezvousGate`);
+            None trusts a single sighting.
+        rendezvous_gate: probability of the χ²(3) quantile below which two sightings' transforms
+            agree (Mahalanobis distance with the sum of their covariances).
     """
 
     descriptor_threshold: float = 0.5
@@ -85,6 +112,12 @@ class FusionConfig:
     per_particle_alignment: bool = True
     join_pose_sigma: tuple[float, float, float] = (0.0, 0.0, 0.0)
     carry_landmarks: bool = True
+    transform_uncertainty: Literal["drift", "proposal"] = "drift"
+    transform_cov_source: Literal["residuals", "landmarks", "larger"] = "residuals"
+    max_join_pose_sigma: float | None = None
+    min_pair_spread: float | None = None
+    rendezvous_window: float | None = 10.0
+    rendezvous_gate: float = 0.99
 
     def __post_init__(self) -> None:
         if self.ransac_iterations < 1 or self.refine_iterations < 0:
@@ -105,5 +138,13 @@ class FusionConfig:
             raise ValueError("residual_variance_scale and transform_sampling_scale must be >= 0")
         if len(self.join_pose_sigma) != 3 or min(self.join_pose_sigma) < 0:
             raise ValueError("join_pose_sigma must be three values >= 0")
+        if self.max_join_pose_sigma is not None and self.max_join_pose_sigma <= 0:
+            raise ValueError("max_join_pose_sigma must be > 0 or None")
+        if self.min_pair_spread is not None and self.min_pair_spread < 0:
+            raise ValueError("min_pair_spread must be >= 0 or None")
+        if self.rendezvous_window is not None and self.rendezvous_window <= 0:
+            raise ValueError("rendezvous_window must be > 0 or None")
+        if not 0 < self.rendezvous_gate < 1:
+            raise ValueError("rendezvous_gate must be in (0, 1)")
         if self.z_variance <= 0:
             raise ValueError("z_variance must be > 0")

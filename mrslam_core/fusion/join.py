@@ -22,11 +22,17 @@ replaced.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
-from mrslam_core.fusion.alignment import Alignment, ransac_align, rigid_transform_2d
+from mrslam_core.fusion.alignment import (
+    Alignment,
+    ransac_align,
+    rigid_transform_2d,
+    transform_information_covariance,
+    transform_jacobian,
+)
 from mrslam_core.fusion.config import FusionConfig
 from mrslam_core.fusion.kalman import kalman_fuse
 from mrslam_core.fusion.maps import FusionError, LandmarkMap
@@ -65,10 +71,13 @@ class JoinResult:
 
 
 def move_landmarks(
-    transform: np.ndarray, mean: np.ndarray, cov: np.ndarray, extra_variance: float = 0.0
+    transform: np.ndarray, mean: np.ndarray, cov: np.ndarray, extra_variance: float = 0.0,
+    transform_cov: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Landmarks moved by planar transforms (tx, ty, θ): p' = R·p + t, Σ' = R·Σ·Rᵀ (z and its
-    variance unchanged), plus ``extra_variance`` [m²] on x and y.
+    variance unchanged), plus ``extra_variance`` [m²] on x and y, plus (``transform_cov``, the
+    (3, 3) covariance of the transform) J_T·Cov T·J_Tᵀ on x, y with J_T = [I₂ | ∂R/∂θ·p] at
+    each landmark's position p before the move.
 
     Args:
         transform: (3,) one transform, or (M, 3) one per leading row of ``mean``.
@@ -86,28 +95,44 @@ def move_landmarks(
     add = np.zeros((dim, dim))
     add[0, 0] = add[1, 1] = extra_variance
     moved = (r @ mean[..., None])[..., 0] + off
-    return moved, r @ cov @ np.swapaxes(r, -1, -2) + add
+    out = r @ cov @ np.swapaxes(r, -1, -2) + add
+    if transform_cov is not None:
+        jac = transform_jacobian(t, mean[..., :2])
+        out[..., :2, :2] += jac @ transform_cov @ np.swapaxes(jac, -1, -2)
+    return moved, out
+
+
+def pose_transform_cov(local: MultiRobotFastSLAM, k: int, transform: np.ndarray, transform_cov: np.ndarray) -> np.ndarray:
+    """J_T·Cov T·J_Tᵀ (3, 3): the covariance the transform's own uncertainty gives the pose
+    T ⊕ x of robot k of ``local``, at its weighted mean local position x (map frame)."""
+    w = np.exp(local.log_w)
+    x = w @ local.poses[:, k, :2]
+    jt = np.eye(3)
+    jt[:2] = transform_jacobian(transform, x[None])[0]
+    return jt @ transform_cov @ jt.T
 
 
 def _moved_pose_covariances(
-    local: MultiRobotFastSLAM, k: int, transform: np.ndarray, transform_cov: np.ndarray | None
+    local: MultiRobotFastSLAM, k: int, transform: np.ndarray, transform_cov: np.ndarray | None,
+    to_pending: bool = False,
 ) -> tuple[np.ndarray | None, np.ndarray | None]:
     """The local robot's drift and pending motion covariances (3, 3) moved into the common frame:
     J_x C J_xᵀ for the pose x ↦ T ⊕ x, plus J_T Cov(T) J_Tᵀ on the drift (the alignment's own
-    uncertainty, at the local weighted mean pose). None where the local filter holds none."""
+    uncertainty, at the local weighted mean pose) and, ``to_pending``, on the pending motion
+    covariance too. None where the local filter holds none."""
     drift = getattr(local, "drift_cov", {}).get(k)
     pending = getattr(local, "pending_cov", {}).get(k)
     c, s = np.cos(transform[2]), np.sin(transform[2])
     jx = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
     if drift is not None:
         drift = jx @ drift @ jx.T
-    if transform_cov is not None and np.isfinite(transform_cov).all():
-        w = np.exp(local.log_w)
-        x = w @ local.poses[:, k, :2]
-        jt = np.array([[1.0, 0.0, -s * x[0] - c * x[1]], [0.0, 1.0, c * x[0] - s * x[1]], [0.0, 0.0, 1.0]])
-        drift = (np.zeros((3, 3)) if drift is None else drift) + jt @ transform_cov @ jt.T
     if pending is not None:
         pending = jx @ pending @ jx.T
+    if transform_cov is not None and np.isfinite(transform_cov).all():
+        from_t = pose_transform_cov(local, k, transform, transform_cov)
+        drift = from_t if drift is None else drift + from_t
+        if to_pending:
+            pending = from_t if pending is None else pending + from_t
     return drift, pending
 
 
@@ -157,6 +182,12 @@ def join_filters(
         pose_cov: (3, 3) covariance of ``transform`` added (propagated to the robot's pose) to
             the drift covariance it enters the joint filter with (default ``transform_cov``); the
             local filter's drift and pending motion noise are moved into the common frame too.
+            With ``config.transform_uncertainty = "proposal"`` and no per-particle sampling
+            (``transform_cov`` None) it is also added to the robot's pending motion covariance
+            and, at each landmark's position, to the moved local landmarks' covariances.
+
+    In the per-pair refit, a pair whose own matched landmarks lie within
+    ``config.min_pair_spread`` (default ``min_spread``) of their centroid keeps ``transform``.
     """
     t = np.asarray(transform, float)
     if t.shape != (3,) or not np.isfinite(t).all():
@@ -181,7 +212,13 @@ def join_filters(
         mc, ec = cs_store.gather(anc_c[:, None], cs[None], ("mean", "exists"))
         ml, el = ls_store.gather(anc_l[:, None], ls[None], ("mean", "exists"))
         w = (ec & el).astype(float)
-        ok = w.sum(1) >= 2
+        n_w = w.sum(1)
+        ok = n_w >= 2
+        # the pair's own spread of matched landmarks (central copies): a rotation needs it
+        cen = (w[..., None] * mc[..., :2]).sum(1) / np.maximum(n_w, 1)[:, None]
+        spread = np.sqrt((w * ((mc[..., :2] - cen[:, None]) ** 2).sum(-1)).sum(1) / np.maximum(n_w, 1))
+        min_pair_spread = config.min_spread if config.min_pair_spread is None else config.min_pair_spread
+        ok &= spread >= min_pair_spread
         if ok.any():
             t_all[ok] = rigid_transform_2d(ml[ok, :, :2], mc[ok, :, :2], w[ok])
     if transform_cov is not None and np.isfinite(transform_cov).all():
@@ -202,7 +239,10 @@ def join_filters(
     central.select_particles(anc_c, central.score[anc_c] + local.score[anc_l])
     central.log_w = normalise_log_weights(pair_ll)
     stamp = local.last_stamp.get(local.robots[kl])
-    drift, pending = _moved_pose_covariances(local, kl, t, transform_cov if pose_cov is None else pose_cov)
+    sampled = transform_cov is not None and np.isfinite(transform_cov).all()
+    to_proposal = config.transform_uncertainty == "proposal" and not sampled and pose_cov is not None
+    lm_cov = pose_cov if to_proposal and np.isfinite(pose_cov).all() else None
+    drift, pending = _moved_pose_covariances(local, kl, t, transform_cov if pose_cov is None else pose_cov, to_proposal)
     joined = compose(t_all, local.poses[anc_l, kl])
     sigma = np.asarray(config.join_pose_sigma, float)
     if sigma.any():
@@ -216,7 +256,7 @@ def join_filters(
     if len(pairs) and config.carry_landmarks:
         mc, sc, ec, nc, scc = cs_store.gather(rows, cs[None], ("mean", "cov", "exists", "count", "score"))
         ml, sl, el, nl, scl = ls_store.gather(anc_l[:, None], ls[None], ("mean", "cov", "exists", "count", "score"))
-        ml, sl = move_landmarks(t_all, ml.astype(float), sl.astype(float), extra_variance)
+        ml, sl = move_landmarks(t_all, ml.astype(float), sl.astype(float), extra_variance, lm_cov)
         mc, sc = mc.astype(float), sc.astype(float)
         both = ec & el
         mean, cov = mc.copy(), sc.copy()
@@ -250,7 +290,7 @@ def join_filters(
     rest = rest[~skip[rest]]
     if rest.size and config.carry_landmarks:
         mean, cov, ex, cnt = ls_store.gather(anc_l[:, None], rest[None])
-        mean, cov = move_landmarks(t_all, mean.astype(float), cov.astype(float), extra_variance)
+        mean, cov = move_landmarks(t_all, mean.astype(float), cov.astype(float), extra_variance, lm_cov)
         slot_map[rest] = central.insert_landmarks(mean, cov, ex, ls_store.descriptor[rest], cnt)
         cs_store.origin[slot_map[rest]] = ls_store.origin[rest]  # the creating track ids
     if not config.carry_landmarks:
@@ -260,11 +300,32 @@ def join_filters(
                       np.column_stack([anc_c, anc_l]), slot_map, t_all)
 
 
+def alignment_covariance(al: Alignment, target: LandmarkMap, source: LandmarkMap, config: FusionConfig,
+                         local: MultiRobotFastSLAM, k: int = 0) -> np.ndarray:
+    """Cov T (3, 3) of an alignment as ``config.transform_cov_source`` says: from the inliers'
+    residuals (``al.cov``), from the inlier landmarks' own covariances
+    (:func:`transform_information_covariance`), or the ``larger`` of the two at the pose of
+    robot k of ``local`` (trace of the propagated x, y block)."""
+    if config.transform_cov_source == "residuals":
+        return al.cov
+    inl = al.inlier_pairs
+    from_lm = transform_information_covariance(
+        al.transform, source.means[inl[:, 1]], source.covs[inl[:, 1]], target.covs[inl[:, 0]])
+    if config.transform_cov_source == "landmarks" or not np.isfinite(al.cov).all():
+        return from_lm
+    at_pose = [np.trace(pose_transform_cov(local, k, al.transform, c)[:2, :2]) for c in (al.cov, from_lm)]
+    return al.cov if at_pose[0] >= at_pose[1] else from_lm
+
+
 def try_join(
     central: MultiRobotFastSLAM, local: MultiRobotFastSLAM, config: FusionConfig, robot: str | None = None
 ) -> tuple[Alignment, JoinResult | None]:
     """Align the local filter's best map to the central filter's best map and, if the alignment
     is accepted, join the local filter into the central one.
+
+    With ``config.max_join_pose_sigma``, an alignment whose covariance (``transform_cov_source``)
+    puts more than that standard deviation on the robot's position is refused as ill-conditioned
+    (``reason`` says so) and nothing is joined.
 
     Returns:
         (the alignment — its ``reason`` says why nothing was joined —, the join or None).
@@ -274,12 +335,20 @@ def try_join(
     al = ransac_align(target, source, config)
     if not al.accepted:
         return al, None
+    kl = local.index.get(robot, 0) if robot else 0
+    t_cov = alignment_covariance(al, target, source, config, local, kl)
+    if config.max_join_pose_sigma is not None:
+        sd = float(np.sqrt(np.trace(pose_transform_cov(local, kl, al.transform, t_cov)[:2, :2])))
+        if not sd <= config.max_join_pose_sigma:
+            return replace(al, accepted=False, reason=(
+                f"alignment ill-conditioned: {al.inliers.size} inliers within {al.spread:.2f} m put "
+                f"{sd:.3f} m on the robot's position (allowed {config.max_join_pose_sigma:.3f} m)")), None
     inl = al.inlier_pairs
     pairs = np.column_stack([target.ids[inl[:, 0]], source.ids[inl[:, 1]]])
     drop = source.ids[al.outlier_pairs[:, 1]] if config.source_outliers == "drop" else None
     extra = (config.residual_variance_scale * al.rmse) ** 2
-    t_cov = al.cov * config.transform_sampling_scale**2 if config.transform_sampling_scale > 0 else None
+    sampled = t_cov * config.transform_sampling_scale**2 if config.transform_sampling_scale > 0 else None
     return al, join_filters(
-        central, local, al.transform, pairs, config, robot, drop, extra, t_cov, config.per_particle_alignment,
-        pose_cov=al.cov,
+        central, local, al.transform, pairs, config, robot, drop, extra, sampled, config.per_particle_alignment,
+        pose_cov=t_cov,
     )

@@ -13,13 +13,22 @@ transform from N(T, Cov T) (Cov T from the sightings' noise and j's pose covaria
 filter's next sightings and landmark observations weigh them. Local landmarks whose barcode /
 descriptor matches a common landmark within ``inlier_distance`` after T are fused, the other
 matched ones are dropped (``source_outliers = drop``) or kept, the rest added, as for a map join.
+
+One mutual sighting is not trusted on its own (``FusionConfig.rendezvous_window``): a misread
+barcode or a wrong range would merge the robot wrongly. :class:`RendezvousGate` holds each
+sighting's transform and lets the robot join only when a second mutual sighting within the window
+gives a transform that agrees with an earlier one, (T₂ − T₁)ᵀ(Cov T₁ + Cov T₂)⁻¹(T₂ − T₁) below the
+χ²(3) quantile ``rendezvous_gate``, and then joins with the two combined; a disagreeing pair is
+logged with its distance. A sighting whose
+two ranges (i's of j, j's of i) disagree beyond the χ²(1) quantile is refused outright.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 
 import numpy as np
+from scipy.stats import chi2
 
 from mrslam_core.fusion.alignment import apply_transform, match_descriptors
 from mrslam_core.fusion.config import FusionConfig
@@ -38,12 +47,15 @@ class Rendezvous:
         relative_cov: (3, 3) its covariance.
         transform: (3,) local frame of i → common frame.
         transform_cov: (3, 3) its covariance (sightings plus j's pose covariance).
+        range_nis: (r_ij − r_ji)² / (var r_ij + var r_ji), the two robots' ranges against each
+            other (χ²(1) for correct readings; 0 when not known).
     """
 
     relative: np.ndarray
     relative_cov: np.ndarray
     transform: np.ndarray
     transform_cov: np.ndarray
+    range_nis: float = 0.0
 
 
 def relative_pose(z_ij: np.ndarray, z_ji: np.ndarray, cov_ij: np.ndarray, cov_ji: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -95,22 +107,112 @@ def rendezvous_transform(
     return Rendezvous(np.asarray(rel, float), rel_cov, t, jac @ cov_in @ jac.T)
 
 
-def join_by_rendezvous(
-    central: MultiRobotFastSLAM, local: MultiRobotFastSLAM, robot: str, seen: str,
-    z_ij: np.ndarray, z_ji: np.ndarray, cov_ij: np.ndarray, cov_ji: np.ndarray, config: FusionConfig,
-) -> tuple[Rendezvous, JoinResult]:
-    """Join ``local`` (robot ``robot``, its own frame) into ``central`` from a mutual sighting with
-    ``seen`` (a robot of ``central``): ``z_ij`` is robot's measurement of seen, ``z_ji`` seen's of
-    robot (range [m], bearing [rad]) with covariances ``cov_ij``, ``cov_ji``.
+def sighting_transform(
+    central: MultiRobotFastSLAM, local: MultiRobotFastSLAM, seen: str,
+    z_ij: np.ndarray, z_ji: np.ndarray, cov_ij: np.ndarray, cov_ji: np.ndarray,
+) -> Rendezvous:
+    """The rendezvous of ``local``'s robot with ``seen`` (a robot of ``central``) now: j's
+    weighted mean pose and covariance in ``central``, the local robot's weighted mean pose, the
+    two readings ``z_ij`` (its of seen), ``z_ji`` (seen's of it), (range [m], bearing [rad])."""
+    est_c, est_l = central.estimate(), local.estimate()
+    j = central.index[seen]
+    rel, rel_cov = relative_pose(z_ij, z_ji, cov_ij, cov_ji)
+    rv = rendezvous_transform(est_c.mean[j], est_c.cov[j], est_l.mean[0], rel, rel_cov)
+    nis = float((z_ij[0] - z_ji[0]) ** 2 / (cov_ij[0, 0] + cov_ji[0, 0]))
+    return replace(rv, range_nis=nis)
+
+
+def transform_distance(a: Rendezvous, b: Rendezvous) -> float:
+    """Squared Mahalanobis distance (T_b − T_a)ᵀ(Cov T_a + Cov T_b)⁻¹(T_b − T_a), θ wrapped: χ²(3)
+    when both are of the same local frame (the shared part of the seen robot's pose covariance is
+    counted twice, so the test errs towards agreeing)."""
+    d = np.asarray(b.transform, float) - np.asarray(a.transform, float)
+    d[2] = wrap_angle(d[2])
+    return float(d @ np.linalg.solve(a.transform_cov + b.transform_cov, d))
+
+
+def fuse_rendezvous(a: Rendezvous, b: Rendezvous) -> Rendezvous:
+    """Two agreeing rendezvous of the same robot combined in information form:
+    Cov = (Cov_a⁻¹ + Cov_b⁻¹)⁻¹, T = T_a + Cov·Cov_b⁻¹·(T_b − T_a) (θ wrapped). The seen robot's
+    pose covariance, common to both, is counted as independent (it is the smaller part when the
+    seen robot is well localised); relative pose and range check are b's."""
+    d = np.asarray(b.transform, float) - np.asarray(a.transform, float)
+    d[2] = wrap_angle(d[2])
+    inv_b = np.linalg.inv(b.transform_cov)
+    cov = np.linalg.inv(np.linalg.inv(a.transform_cov) + inv_b)
+    cov = 0.5 * (cov + cov.T)
+    t = np.asarray(a.transform, float) + cov @ inv_b @ d
+    t[2] = wrap_angle(t[2])
+    return replace(b, transform=t, transform_cov=cov)
+
+
+@dataclass
+class RendezvousGate:
+    """Mutual sightings of robots not merged yet, held until two of them agree.
+
+    Attributes:
+        window: seconds over which an earlier sighting can confirm a later one (None: every
+            sighting is trusted alone).
+        threshold: largest :func:`transform_distance` of two agreeing sightings (χ²(3) quantile).
+        range_threshold: largest ``range_nis`` of one sighting (χ²(1) quantile of the same
+            probability): the two robots' ranges of each other must agree before the sighting
+            is held at all (the relative pose averages them, which halves one wrong range).
+        held: robot -> [(time [s], seen robot, Rendezvous)] within the window.
+        log: robot -> reasons a sighting did not confirm (for the log).
+    """
+
+    window: float | None
+    threshold: float
+    range_threshold: float = float("inf")
+    held: dict[str, list[tuple[float, str, Rendezvous]]] = field(default_factory=dict)
+    log: dict[str, list[str]] = field(default_factory=dict)
+
+    @classmethod
+    def from_config(cls, config: FusionConfig) -> RendezvousGate:
+        p = config.rendezvous_gate
+        return cls(config.rendezvous_window, float(chi2.ppf(p, 3)), float(chi2.ppf(p, 1)))
+
+    def offer(self, robot: str, time_s: float, seen: str, rv: Rendezvous) -> Rendezvous | None:
+        """A new mutual sighting of ``robot`` (time [s], the robot seen, its rendezvous).
+
+        Returns:
+            when confirmed, ``rv`` combined with the closest agreeing earlier sighting
+            (:func:`fuse_rendezvous`; ``rv`` itself when no window is set); else None (``rv``
+            held, the reason appended to ``log``).
+        """
+        if self.window is None:
+            return rv
+        if not rv.range_nis <= self.range_threshold:
+            self.log.setdefault(robot, []).append(
+                f"{time_s:.1f} s: sighting with {seen}: the two ranges disagree (normalised "
+                f"{rv.range_nis:.1f} > {self.range_threshold:.1f}): not merged")
+            return None
+        held = [h for h in self.held.get(robot, []) if time_s - h[0] <= self.window]
+        dist = [transform_distance(h[2], rv) for h in held]
+        if dist and min(dist) <= self.threshold:
+            self.held.pop(robot, None)
+            return fuse_rendezvous(held[int(np.argmin(dist))][2], rv)
+        if dist:
+            h = held[int(np.argmin(dist))]
+            self.log.setdefault(robot, []).append(
+                f"{time_s:.1f} s: sighting with {seen} disagrees with the one with {h[1]} at {h[0]:.1f} s "
+                f"(distance² {min(dist):.1f} > {self.threshold:.1f}): not merged")
+        else:
+            self.log.setdefault(robot, []).append(
+                f"{time_s:.1f} s: sighting with {seen} held until a second one within {self.window:.0f} s agrees")
+        self.held[robot] = [*held, (time_s, seen, rv)]
+        return None
+
+
+def join_rendezvous(
+    central: MultiRobotFastSLAM, local: MultiRobotFastSLAM, robot: str, rv: Rendezvous, config: FusionConfig,
+) -> JoinResult:
+    """Join ``local`` (robot ``robot``) into ``central`` with the rendezvous transform ``rv``.
 
     Landmarks: descriptor matches between the two best maps whose positions agree within
     ``config.inlier_distance`` after the rendezvous transform are fused; other matches follow
     ``config.source_outliers``.
     """
-    est_c, est_l = central.estimate(), local.estimate()
-    j = central.index[seen]
-    rel, rel_cov = relative_pose(z_ij, z_ji, cov_ij, cov_ji)
-    rv = rendezvous_transform(est_c.mean[j], est_c.cov[j], est_l.mean[0], rel, rel_cov)
     target = LandmarkMap.from_filter(central, z_variance=config.z_variance)
     source = LandmarkMap.from_filter(local, z_variance=config.z_variance)
     pairs = np.zeros((0, 2), np.int64)
@@ -123,8 +225,19 @@ def join_by_rendezvous(
             pairs = np.column_stack([target.ids[matches[ok, 0]], source.ids[matches[ok, 1]]])
             if config.source_outliers == "drop":
                 drop = source.ids[matches[~ok, 1]]
-    res = join_filters(
+    return join_filters(
         central, local, rv.transform, pairs, config, robot, drop, 0.0, rv.transform_cov, per_pair=False,
         pose_cov=rv.transform_cov,
     )
-    return rv, res
+
+
+def join_by_rendezvous(
+    central: MultiRobotFastSLAM, local: MultiRobotFastSLAM, robot: str, seen: str,
+    z_ij: np.ndarray, z_ji: np.ndarray, cov_ij: np.ndarray, cov_ji: np.ndarray, config: FusionConfig,
+) -> tuple[Rendezvous, JoinResult]:
+    """Join ``local`` (robot ``robot``, its own frame) into ``central`` from one mutual sighting
+    with ``seen`` (a robot of ``central``), trusted as it is: ``z_ij`` is robot's measurement of
+    seen, ``z_ji`` seen's of robot (range [m], bearing [rad]) with covariances ``cov_ij``,
+    ``cov_ji``. See :class:`RendezvousGate` to require a second, agreeing sighting first."""
+    rv = sighting_transform(central, local, seen, z_ij, z_ji, cov_ij, cov_ji)
+    return rv, join_rendezvous(central, local, robot, rv, config)

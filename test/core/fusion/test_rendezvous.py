@@ -5,9 +5,19 @@ local frame into the common frame, p_common = R·p_local + t.
 """
 
 import numpy as np
+from scipy.stats import chi2
 
 from mrslam_core.fusion.config import FusionConfig
-from mrslam_core.fusion.rendezvous import join_by_rendezvous, relative_pose, rendezvous_transform
+from mrslam_core.fusion.rendezvous import (
+    RendezvousGate,
+    fuse_rendezvous,
+    join_by_rendezvous,
+    join_rendezvous,
+    relative_pose,
+    rendezvous_transform,
+    sighting_transform,
+    transform_distance,
+)
 from mrslam_core.geometry.se2 import between, compose, inverse, wrap_angle
 from mrslam_core.slam.config import FilterConfig
 from mrslam_core.slam.filter import MultiRobotFastSLAM
@@ -70,3 +80,87 @@ def test_join_by_rendezvous_places_the_robot_and_fuses_the_landmark_it_shares():
     # the local-only landmark arrives near its true common-frame position (spread by the transforms)
     mean, ex = central.landmarks.gather(np.arange(400)[:, None], res.slot_map[1:2][None], ("mean", "exists"))
     assert ex.all() and np.linalg.norm(mean[:, 0, :2].mean(0) - np.array([0.0, 6.0])) < 0.1
+
+
+def _gate_world():
+    """Robot j ('a') of the central filter at a known pose; robot i ('b') with its own frame."""
+    t_true = np.array([1.5, -2.0, 0.9])  # local frame of b -> common frame
+    x_j, x_i, x_k = np.array([0.0, 0.0, 0.3]), np.array([2.0, 1.5, -2.4]), np.array([0.5, 2.5, 1.0])
+    central = MultiRobotFastSLAM(FilterConfig(num_particles=200, seed=3), ["a"], x_j[None])
+    central.poses[:, 0] = x_j
+    local = MultiRobotFastSLAM(FilterConfig(num_particles=10, seed=4), ["b"], np.zeros((1, 3)))
+    local.poses[:, 0] = compose(inverse(t_true), x_i)
+    return t_true, x_i, x_j, x_k, central, local
+
+
+def _sighting(central, local, z_ij, z_ji, rng):
+    noise = np.sqrt(np.diag(COV))
+    return sighting_transform(central, local, "a", z_ij + rng.standard_normal(2) * noise,
+                              z_ji + rng.standard_normal(2) * noise, COV, COV)
+
+
+def test_a_single_mutual_sighting_is_held_and_a_consistent_second_one_merges():
+    t_true, x_i, x_j, _, central, local = _gate_world()
+    rng = np.random.default_rng(5)
+    cfg = FusionConfig(inlier_distance=0.5, source_outliers="drop", rendezvous_window=10.0)
+    gate = RendezvousGate.from_config(cfg)
+    z_ij, z_ji = range_bearing(x_i, x_j), range_bearing(x_j, x_i)
+    first = _sighting(central, local, z_ij, z_ji, rng)
+    assert gate.offer("b", 20.0, "a", first) is None and "held" in gate.log["b"][-1]
+    second = _sighting(central, local, z_ij, z_ji, rng)
+    assert transform_distance(first, second) < gate.threshold
+    ok = gate.offer("b", 20.4, "a", second)
+    assert "b" not in gate.held
+    # the two combined in information form: between them, tighter than either
+    np.testing.assert_allclose(ok.transform, fuse_rendezvous(first, second).transform)
+    lo, hi = np.minimum(first.transform, second.transform), np.maximum(first.transform, second.transform)
+    assert np.all(ok.transform >= lo - 1e-12) and np.all(ok.transform <= hi + 1e-12)
+    assert np.trace(ok.transform_cov) < min(np.trace(first.transform_cov), np.trace(second.transform_cov))
+    res = join_rendezvous(central, local, "b", ok, cfg)
+    assert central.robots == ["a", "b"] and res.robot == "b"
+    p = central.poses[:, 1]
+    assert np.linalg.norm(p[:, :2].mean(0) - x_i[:2]) < 0.3
+    np.testing.assert_allclose(ok.transform[:2], t_true[:2], atol=0.5)
+
+
+def test_a_corrupted_sighting_does_not_merge_and_says_why():
+    """A misread barcode (i's reading is of robot k, not j) disagrees with a correct sighting; a
+    wrong range (1.5 m too long) disagrees with the other robot's range and is refused outright;
+    a later correct sighting confirms the first."""
+    _, x_i, x_j, x_k, central, local = _gate_world()
+    rng = np.random.default_rng(6)
+    gate = RendezvousGate.from_config(FusionConfig(rendezvous_window=10.0, rendezvous_gate=0.99))
+    assert gate.threshold == np.float64(chi2.ppf(0.99, 3))
+    z_ij, z_ji = range_bearing(x_i, x_j), range_bearing(x_j, x_i)
+    good = _sighting(central, local, z_ij, z_ji, rng)
+    misread = _sighting(central, local, range_bearing(x_i, x_k), z_ji, rng)
+    too_far = _sighting(central, local, z_ij + np.array([1.5, 0.0]), z_ji, rng)
+    assert gate.offer("b", 30.0, "a", good) is None
+    assert transform_distance(good, misread) > gate.threshold
+    assert gate.offer("b", 30.2, "a", misread) is None
+    assert "disagrees with the one with a at 30.0 s" in gate.log["b"][-1] and "not merged" in gate.log["b"][-1]
+    assert too_far.range_nis > gate.range_threshold > good.range_nis
+    assert gate.offer("b", 30.4, "a", too_far) is None
+    assert "ranges disagree" in gate.log["b"][-1]
+    assert [h[0] for h in gate.held["b"]] == [30.0, 30.2]  # the refused one is not even held
+    assert len(central.robots) == 1  # nothing merged
+    again = _sighting(central, local, z_ij, z_ji, rng)
+    confirmed = gate.offer("b", 31.0, "a", again)
+    np.testing.assert_allclose(confirmed.transform, fuse_rendezvous(good, again).transform)
+
+
+def test_a_corrupted_first_sighting_is_outvoted_and_old_sightings_expire():
+    _, x_i, x_j, x_k, central, local = _gate_world()
+    rng = np.random.default_rng(7)
+    gate = RendezvousGate.from_config(FusionConfig(rendezvous_window=5.0))
+    z_ij, z_ji = range_bearing(x_i, x_j), range_bearing(x_j, x_i)
+    assert gate.offer("b", 10.0, "a", _sighting(central, local, range_bearing(x_i, x_k), z_ji, rng)) is None
+    assert gate.offer("b", 10.2, "a", _sighting(central, local, z_ij, z_ji, rng)) is None
+    late = _sighting(central, local, z_ij, z_ji, rng)
+    assert gate.offer("b", 16.0, "a", late) is None  # the correct one at 10.2 s is 5.8 s old
+    assert "held" in gate.log["b"][-1]
+    confirm = _sighting(central, local, z_ij, z_ji, rng)
+    np.testing.assert_allclose(gate.offer("b", 16.2, "a", confirm).transform, fuse_rendezvous(late, confirm).transform)
+    # no window: one sighting is trusted as it is
+    single = RendezvousGate.from_config(FusionConfig(rendezvous_window=None))
+    assert single.offer("b", 1.0, "a", confirm) is confirm
