@@ -196,8 +196,9 @@ def run_unknown_start(ds: MrclamDataset, cfg: MrclamFusionConfig, progress: bool
                 if meet is None:
                     continue
                 j, z_ij, z_ji = meet
-                rv = sighting_transform(central, local[i], name[j], z_ij, z_ji, rr_cov, rr_cov)
-                if gate.offer(name[i], float(times[k] - t0), name[j], rv) is None:
+                rv = gate.offer(name[i], float(times[k] - t0), name[j],
+                                sighting_transform(central, local[i], name[j], z_ij, z_ji, rr_cov, rr_cov))
+                if rv is None:  # held until a second sighting agrees, or refused
                     attempts[name[i]].append(gate.log[name[i]][-1])
                     continue
                 joined = join_rendezvous(central, local[i], name[i], rv, cfg.fusion)

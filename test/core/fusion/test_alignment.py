@@ -13,6 +13,7 @@ from mrslam_core.fusion.alignment import (
     ransac_align,
     rigid_transform_2d,
     transform_cramer_rao,
+    transform_information_covariance,
 )
 from mrslam_core.fusion.config import FusionConfig
 from mrslam_core.fusion.maps import LandmarkMap
@@ -120,3 +121,18 @@ def test_far_transforms_at_30_percent_wrong_matches_are_accurate_where_the_maps_
     # an efficient estimator: mean of χ²(3) is 3 (20 trials: ±0.55); a fit that wasted the
     # information (e.g. unweighted with an outlier inside) would sit far above
     assert 1.5 <= np.mean(nees) <= 5.0, np.mean(nees)
+
+
+def test_landmark_covariance_bound_equals_the_isotropic_one_and_weighs_each_pair():
+    rng = np.random.default_rng(11)
+    t = np.array([1.0, -2.0, 2.4])
+    src = rng.uniform(-3, 3, (6, 2))
+    iso = np.broadcast_to(np.eye(2) * 0.05**2, (6, 2, 2))
+    np.testing.assert_allclose(transform_information_covariance(t, src, iso, iso),
+                               transform_cramer_rao(t, src, 0.05), rtol=1e-10)
+    # one pair far less certain: the bound lies between dropping it and counting it as certain
+    loose = iso.copy()
+    loose[0] = np.eye(2) * 1.0
+    c = transform_information_covariance(t, src, loose, iso)
+    drop = transform_cramer_rao(t, src[1:], 0.05)
+    assert np.trace(transform_cramer_rao(t, src, 0.05)) < np.trace(c) < np.trace(drop)

@@ -223,3 +223,87 @@ def test_without_carrying_landmarks_only_the_robot_joins():
     for a, b in zip(after, c_lm):
         np.testing.assert_array_equal(a, b[ic])
     np.testing.assert_allclose(central.poses[:, 1], compose(T, local.poses[il, 0]), atol=1e-12)
+
+
+def test_per_pair_refit_keeps_the_transform_where_the_pair_cannot_fix_the_rotation():
+    """Two matched landmarks 4 cm apart (in every particle) with local copies a little off: a
+    refit on them would turn the robot by an arbitrary angle, so every pair keeps T; 3 m apart
+    the same offsets are refitted."""
+    for gap, refit in ((0.04, False), (3.0, True)):
+        central, local = hand_filters(7)
+        m = central.num_particles
+        truth = np.array([[1.0, 2.0, 0.0], [1.0 + gap, 2.0, 0.0]])
+        central.landmarks.write(np.repeat(np.arange(m), 2), np.tile([0, 1], m), mean=np.tile(truth, (m, 1)))
+        in_local = between(T, truth)
+        in_local[:, 2] = 0.0
+        vals = np.repeat(in_local[None], 4, axis=0) + np.array([[0.02, 0.0, 0.0], [-0.02, 0.01, 0.0]])
+        local.landmarks.write(np.repeat(np.arange(4), 2), np.tile([0, 1], 4), mean=vals.reshape(-1, 3))
+        res = join_filters(central, local, T, np.array([[0, 0], [1, 1]]), FusionConfig(min_spread=0.5), per_pair=True)
+        both = res.ancestors[:, 0] != 5  # central particle 5 lacks landmark 1
+        moved = np.abs(res.transforms[both] - T).max()
+        assert (moved > 1e-3) if refit else (moved == 0.0), (gap, moved)
+        np.testing.assert_array_equal(res.transforms[~both], np.broadcast_to(T, ((~both).sum(), 3)))
+
+
+def test_transform_uncertainty_into_the_proposal_and_the_moved_landmarks():
+    """``proposal``: J_T Cov T J_Tᵀ at the robot's local position joins its pending motion
+    covariance (and its drift), and each moved local landmark's x, y covariance grows by
+    J_T Cov T J_Tᵀ at its own local position."""
+    cov_t = np.diag([0.02, 0.01, 0.003])
+    out = {}
+    for mode in ("drift", "proposal"):
+        central, local = hand_filters(8)
+        local.poses[:, 0] = np.array([1.0, -2.0, 0.3])  # every particle at one local pose
+        res = join_filters(central, local, T, np.array([[0, 0]]), FusionConfig(transform_uncertainty=mode),
+                           pose_cov=cov_t)
+        out[mode] = (central, local, res)
+    jt = np.eye(3)
+    c, s = np.cos(T[2]), np.sin(T[2])
+    jt[:2, 2] = [-s * 1.0 - c * -2.0, c * 1.0 - s * -2.0]
+    from_t = jt @ cov_t @ jt.T
+    central, _, _ = out["drift"]
+    assert 1 not in central.pending_cov
+    np.testing.assert_allclose(central.drift_cov[1], from_t, atol=1e-15)
+    central, local, res = out["proposal"]
+    np.testing.assert_allclose(central.pending_cov[1], from_t, atol=1e-15)
+    np.testing.assert_allclose(central.drift_cov[1], from_t, atol=1e-15)
+    # a local-only landmark (local slot 3, held by every local particle): moved covariance + J Cov Jᵀ
+    slot = res.slot_map[3]
+    (cov_p,) = central.landmarks.gather(np.arange(6), np.full(6, slot), ("cov",))
+    (cov_d,) = out["drift"][0].landmarks.gather(np.arange(6), np.full(6, out["drift"][2].slot_map[3]), ("cov",))
+    il = res.ancestors[:, 1]
+    (lm,) = local.landmarks.gather(il, np.full(6, 3), ("mean",))
+    for n in range(6):
+        j = np.array([[1.0, 0.0, -s * lm[n, 0] - c * lm[n, 1]], [0.0, 1.0, c * lm[n, 0] - s * lm[n, 1]]])
+        np.testing.assert_allclose(cov_p[n, :2, :2] - cov_d[n, :2, :2], j @ cov_t @ j.T, atol=1e-6)
+        np.testing.assert_allclose(cov_p[n, 2], cov_d[n, 2], atol=1e-7)
+
+
+def test_an_ill_conditioned_alignment_is_refused_with_its_reason():
+    """Four shared landmarks within 0.6 m, 8 m from the robot: accepted by the inlier checks, but
+    its covariance puts decimetres on the robot's position; refused under a 0.05 m bound."""
+    rng = np.random.default_rng(9)
+    world = np.array([[5.0, 5.0], [5.6, 5.0], [5.0, 5.6], [5.6, 5.6]])
+    eye = np.eye(4, dtype=np.float32)
+
+    def filters():
+        central = MultiRobotFastSLAM(FilterConfig(num_particles=5, seed=1), ["a"], np.zeros((1, 3)))
+        pts = np.column_stack([world + rng.normal(0, 0.03, world.shape), np.zeros(4)])
+        central.insert_landmarks(np.broadcast_to(pts, (5, 4, 3)).copy(), np.broadcast_to(np.eye(3) * 1e-3, (5, 4, 3, 3)).copy(),
+                                 np.ones((5, 4), bool), eye)
+        local = MultiRobotFastSLAM(FilterConfig(num_particles=3, seed=2), ["b"], np.zeros((1, 3)))
+        loc = between(T, np.column_stack([world + rng.normal(0, 0.03, world.shape), np.zeros(4)]))
+        loc[:, 2] = 0.0
+        local.insert_landmarks(np.broadcast_to(loc, (3, 4, 3)).copy(), np.broadcast_to(np.eye(3) * 1e-3, (3, 4, 3, 3)).copy(),
+                               np.ones((3, 4), bool), eye)
+        local.poses[:, 0] = between(T, np.array([-2.0, -1.0, 0.0]))  # 8 m from the landmarks
+        return central, local
+
+    cfg = FusionConfig(min_inliers=4, min_spread=0.2)
+    central, local = filters()
+    al, joined = try_join(central, local, cfg)
+    assert al.accepted and joined is not None
+    central, local = filters()
+    al, joined = try_join(central, local, replace(cfg, max_join_pose_sigma=0.05))
+    assert joined is None and not al.accepted and "ill-conditioned" in al.reason
+    assert central.robots == ["a"]
