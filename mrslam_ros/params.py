@@ -91,6 +91,7 @@ def declare_config(node: Node, default: Any, prefix: str = "") -> None:
             descriptor.dynamic_typing = True
             node.declare_parameter(name, None, descriptor)
         elif isinstance(value, list) and not value:
+            descriptor.dynamic_typing = False  # rclpy takes a type or dynamic typing, not both
             node.declare_parameter(name, array_type or Parameter.Type.DOUBLE_ARRAY, descriptor)
         else:
             node.declare_parameter(name, value, descriptor)

@@ -133,7 +133,7 @@ class SlamNode(Node):
                                                  self.cfg.input_depth, callback_group=inputs) for r in robots]
         self.unknown: set[str] = set()
         self.latency_ms: deque[float] = deque(maxlen=100_000)
-        self._merges_logged = 0
+        self._merges_logged = self._relocs_logged = 0
         self.create_timer(self.cfg.map_period, self.on_timer)
         self.create_timer(self.cfg.process_period, self.on_process, clock=Clock(clock_type=ClockType.STEADY_TIME))
         if self.cfg.checkpoint:
@@ -232,6 +232,13 @@ class SlamNode(Node):
             else:
                 self.get_logger().info(f"{m['robot']} not merged yet: {m['reason']}", throttle_duration_sec=10.0)
         self._merges_logged = len(self.mapper.merges)
+        for e in self.mapper.relocalizations[self._relocs_logged:]:
+            if e["accepted"]:
+                self.get_logger().info(f"{e['robot']} back after {e['gap_s']:.1f} s: re-localised on the map "
+                                       f"({e['inliers']} inliers, {e['shift_m']:.2f} m from dead reckoning)")
+            else:
+                self.get_logger().warning(f"{e['robot']} back after {e['gap_s']:.1f} s, not re-localised: {e['reason']}")
+        self._relocs_logged = len(self.mapper.relocalizations)
 
     def on_timer(self) -> None:
         self._look_for_unknown_robots()

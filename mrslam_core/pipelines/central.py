@@ -45,6 +45,18 @@ class CentralConfig:
         unknown_start: robots whose start pose is unknown (their ``start_poses`` entries are not
             used); if every robot is listed, the first one's start pose defines the map frame.
         merge_every: updates of a robot with an unknown start between attempts to align its map.
+        relocalize_after: a robot whose previous update is older than this (it went silent:
+            a link down, a frontend restarted) is placed by its observations instead of by its
+            odometry over the gap: its observation set is aligned to the best particle's map
+            (descriptor matches, RANSAC and least squares, ``fusion`` thresholds) and its
+            particles drawn from the fit (stereo points only); 0: never [s].
+        relocalize_min_associations: an update in which the robot's observations were matched
+            to fewer landmarks than this (mean over the particles) did not show it the map: the
+            gap of ``relocalize_after`` runs from its last update that did (a robot facing a
+            blank wall is as lost as a silent one); 0: only silence counts.
+        relocalize_gate: the fit is used only within this distance of the dead-reckoned pose,
+            plus ``relocalize_drift`` times the distance driven during the gap [m].
+        relocalize_drift: see ``relocalize_gate`` [m/m].
         filter: the multi-robot filter (and each unknown-start robot's local filter).
         fusion: map alignment and joining of unknown-start robots.
     """
@@ -56,6 +68,10 @@ class CentralConfig:
     max_queue: int = 200
     unknown_start: tuple[str, ...] = ()
     merge_every: int = 10
+    relocalize_after: float = 5.0
+    relocalize_min_associations: int = 0
+    relocalize_gate: float = 0.5
+    relocalize_drift: float = 0.1
     filter: FilterConfig = field(default_factory=FilterConfig)
     fusion: FusionConfig = field(default_factory=FusionConfig)
 
@@ -111,6 +127,8 @@ class CentralMapper:
         self._local_updates: Counter[str] = Counter()
         #: every alignment attempt: robot, stamp_ns, accepted, reason, inliers, rmse_m, transform
         self.merges: list[dict] = []
+        #: every re-localisation after a gap: robot, stamp_ns, gap_s, accepted, reason, inliers, shift_m
+        self.relocalizations: list[dict] = []
         self.drops: Counter[str] = Counter()
         self.update_ms: list[float] = []
         self.trajectory: dict[str, list[tuple[int, np.ndarray]]] = {r: [] for r in robots}
@@ -120,6 +138,8 @@ class CentralMapper:
         self._seq = 0
         self._latest_obs: dict[str, int] = {}
         self._last: dict[str, tuple[int, np.ndarray]] = {}
+        self._saw_map: dict[str, int] = {}  # stamp of each robot's last update that matched the map
+        self._reloc_tried: dict[str, int] = {}
         self._wait_ns = int(cfg.max_wait * 1e9)
         self.now_ns = 0  # newest observation stamp received
         self._first_ns: int | None = None
@@ -221,11 +241,22 @@ class CentralMapper:
         reference = buf[0][1] if prev is None else prev[1]
         filt = self.local.get(obs.robot, self.slam)
         t0 = time.perf_counter()
+        motion = between(reference, odom)
+        seen = self._saw_map.get(obs.robot, obs.stamp_ns if prev is None else prev[0])
+        gap = (obs.stamp_ns - seen) * 1e-9
+        tried = self._reloc_tried.get(obs.robot, seen)
+        if (filt is self.slam and 0 < self.cfg.relocalize_after < gap and obs.stamp_ns - tried >= 1e9
+                and self.cfg.filter.observation_model == "stereo_point" and len(obs)):
+            self._reloc_tried[obs.robot] = obs.stamp_ns
+            if self._relocalize(obs, motion, gap, self._path_length(obs.robot, seen, obs.stamp_ns)):
+                motion = np.zeros(3)  # the particles are at this stamp already
         try:
-            filt.step([RobotUpdate(obs.robot, obs.stamp_ns, between(reference, odom), obs)])
+            result = filt.step([RobotUpdate(obs.robot, obs.stamp_ns, motion, obs)])
         except FilterInputError:
             self.drops["bad_observations"] += 1
             return None
+        if result.associated >= self.cfg.relocalize_min_associations * filt.num_particles:
+            self._saw_map[obs.robot] = obs.stamp_ns
         ms = (time.perf_counter() - t0) * 1e3
         self.update_ms.append(ms)
         self._last[obs.robot] = (obs.stamp_ns, odom)
@@ -240,6 +271,51 @@ class CentralMapper:
         if merged:
             self.trajectory[obs.robot].append((obs.stamp_ns, est.mean[k].copy()))
         return Processed(obs.robot, obs.stamp_ns, est.mean[k].copy(), est.cov[k].copy(), odom, ms, merged)
+
+    def _path_length(self, robot: str, t0: int, t1: int) -> float:
+        """Distance the odometry of ``robot`` covered between stamps ``t0`` and ``t1`` [m]."""
+        xy = np.array([p[:2] for s, p in self._odom[robot] if t0 <= s <= t1]).reshape(-1, 2)
+        return float(np.linalg.norm(np.diff(xy, axis=0), axis=1).sum())
+
+    def _relocalize(self, obs: ObservationSet, motion: np.ndarray, gap: float, travelled: float) -> bool:
+        """Place ``obs.robot``, back after ``gap`` s and ``travelled`` m, by aligning its
+        observation set (base_link) to the best particle's map; True if its particles were
+        redrawn (logged in :attr:`relocalizations` either way)."""
+        from mrslam_core.fusion.alignment import ransac_align
+        from mrslam_core.fusion.maps import FusionError, LandmarkMap
+        from mrslam_core.geometry.se2 import compose, wrap_angle
+
+        slam, k = self.slam, self.slam.index[obs.robot]
+        w = np.exp(slam.log_w - slam.log_w.max())
+        w /= w.sum()
+        mean = slam.poses[:, k]
+        th = np.arctan2(w @ np.sin(mean[:, 2]), w @ np.cos(mean[:, 2]))
+        dead = compose(np.array([w @ mean[:, 0], w @ mean[:, 1], th]), motion)
+        entry = {"robot": obs.robot, "stamp_ns": int(obs.stamp_ns), "gap_s": gap, "travelled_m": travelled,
+                 "accepted": False}
+        self.relocalizations.append(entry)
+        try:
+            frame = LandmarkMap(obs.z, obs.cov, obs.descriptors)
+            al = ransac_align(LandmarkMap.from_filter(slam), frame, self.cfg.fusion)
+        except FusionError as exc:
+            entry["reason"] = str(exc)
+            return False
+        entry.update(reason=al.reason, inliers=int(len(al.inliers)))
+        if not al.accepted:
+            return False
+        shift = float(np.hypot(*(al.transform[:2] - dead[:2])))
+        entry["shift_m"] = shift
+        limit = self.cfg.relocalize_gate + self.cfg.relocalize_drift * travelled
+        if shift > limit:
+            entry["reason"] = f"the fit is {shift:.2f} m from the dead-reckoned pose (gate {limit:.2f} m)"
+            return False
+        cov = np.nan_to_num(al.cov) + np.diag([0.02**2, 0.02**2, 0.01**2])  # a floor for a fit of few points
+        chol = np.linalg.cholesky(0.5 * (cov + cov.T))
+        draws = al.transform + (chol @ slam.rng.standard_normal((slam.num_particles, 3, 1)))[..., 0]
+        draws[:, 2] = wrap_angle(draws[:, 2])
+        slam.add_robot(obs.robot, draws)
+        entry["accepted"] = True
+        return True
 
     def _try_merge(self, robot: str, stamp_ns: int) -> None:
         from mrslam_core.fusion.join import try_join

@@ -119,6 +119,34 @@ class OdometryNoiseConfig:
 
 
 @dataclass(frozen=True)
+class RouteConfig:
+    """A closed loop of waypoints; empty: the robots follow their commands (cmd_vel).
+
+    Attributes:
+        waypoints: x0 y0 x1 y1 … in the map frame [m]; the loop closes from the last to the
+            first, and every robot drives it in this order from the point of it nearest to it.
+        speed: forward speed on the route [m/s].
+        turn_rate: turn rate limit [rad/s].
+        lookahead: pure-pursuit lookahead [m].
+        start_interval: robot k (0-based) stands still until k · start_interval, so robots that
+            start close together drive the loop apart (each would otherwise film the one ahead,
+            a moving object, all the way) [s].
+    """
+
+    waypoints: tuple[float, ...] = ()
+    speed: float = 0.3
+    turn_rate: float = 0.5
+    lookahead: float = 0.5
+    start_interval: float = 0.0
+
+    def __post_init__(self) -> None:
+        if len(self.waypoints) % 2 or 0 < len(self.waypoints) < 6:
+            raise SimError(f"route.waypoints: x y pairs of at least 3 points, got {len(self.waypoints)} numbers")
+        if min(self.speed, self.turn_rate, self.lookahead) <= 0 or self.start_interval < 0:
+            raise SimError("route: speed, turn_rate and lookahead must be > 0, start_interval >= 0")
+
+
+@dataclass(frozen=True)
 class SimConfig:
     """The simulation.
 
@@ -128,6 +156,7 @@ class SimConfig:
         seed: seeds the odometry noise and the procedural textures.
         texture_density: texels per metre on the floor, walls and furniture.
         laser_height: height of the ray-cast pseudo-laser above the floor [m].
+        route: a loop the robots drive on their own (default: none, they follow commands).
     """
 
     world: str = "office"
@@ -138,6 +167,7 @@ class SimConfig:
     camera: StereoCameraConfig = field(default_factory=StereoCameraConfig)
     drive: DriveConfig = field(default_factory=DriveConfig)
     odometry: OdometryNoiseConfig = field(default_factory=OdometryNoiseConfig)
+    route: RouteConfig = field(default_factory=RouteConfig)
 
     def __post_init__(self) -> None:
         if self.physics_hz < 10:

@@ -31,6 +31,7 @@ from mrslam_core.sim import robot as robot_model
 from mrslam_core.sim.config import SimConfig
 from mrslam_core.sim.errors import SimError
 from mrslam_core.sim.odometry import noisy_increment, true_increment
+from mrslam_core.sim.route import RouteDriver
 from mrslam_core.sim.scene import build_scene
 from mrslam_core.sim.world import World, load_world
 
@@ -87,6 +88,7 @@ class Simulation:
         self._odom = np.zeros((0, 3))
         self._odom_twist = np.zeros((0, 2))
         self._next_frame_ns = np.zeros(0, np.int64)
+        self._route = RouteDriver(self.config.route) if self.config.route.waypoints else None
         self._tmp = tempfile.TemporaryDirectory(prefix="mrslam_sim_")
         self.client: int | None = p.connect(p.DIRECT)
         if self.client < 0:
@@ -153,7 +155,8 @@ class Simulation:
 
     def set_command(self, name: str, v: float, omega: float) -> None:
         """Command forward speed ``v`` [m/s] and turn rate ``omega`` [rad/s] (counter-clockwise
-        positive), clipped to the drive's limits; held until the next command.
+        positive), clipped to the drive's limits; held until the next command. With a route
+        (``SimConfig.route``) the route steers instead and commands are ignored.
 
         Raises:
             SimError: unknown robot or a non-finite command.
@@ -235,6 +238,10 @@ class Simulation:
         d, dt, cid = self.config.drive, self._dt, self.client
         depth = np.zeros(len(self._names))  # deepest contact at the current poses (negative: penetrating) [m]
         if self._names:
+            if self._route is not None:
+                waited = self._time_ns * 1e-9 >= self.config.route.start_interval * np.arange(len(self._names))
+                for i, pose in enumerate(self._truth):
+                    self._cmd[i] = self._route.command(pose) if waited[i] else (0.0, 0.0)
             lim = np.array([d.max_accel, d.max_turn_accel]) * dt
             self._vel = self._vel + np.clip(self._cmd - self._vel, -lim, lim)
             th = self._truth[:, 2]

@@ -222,3 +222,62 @@ def test_a_robot_with_an_unknown_start_is_merged_and_then_localised_in_the_map()
     err = [np.linalg.norm(p[:2] - truth[("robot2", s)][:2]) for s, p in zip(t, poses)]
     assert np.sqrt(np.mean(np.square(err))) < 0.3, err
     assert m.trajectories()["robot1"][0].size >= 79
+
+
+def _world(n: int = 300, seed: int = 4) -> tuple[np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(seed)
+    pts = np.column_stack([rng.uniform(-1, 8, n), rng.uniform(-4, 4, n), rng.uniform(0, 2, n)])
+    return pts, rng.uniform(0, 1, (n, 16)).astype(np.float32)
+
+
+def _seen(robot: str, t: float, pose: np.ndarray, pts: np.ndarray, desc: np.ndarray, seed: int) -> ObservationSet:
+    """Stereo points (base_link) of the landmarks 0.5-4 m ahead within ±45°, 1 cm noise."""
+    c, s = np.cos(pose[2]), np.sin(pose[2])
+    d = pts[:, :2] - pose[:2]
+    local = np.column_stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1], pts[:, 2]])
+    rng_ = np.linalg.norm(local[:, :2], axis=1)
+    vis = (local[:, 0] > 0.5) & (rng_ < 4.0) & (np.abs(np.arctan2(local[:, 1], local[:, 0])) < np.pi / 4)
+    z = local[vis] + np.random.default_rng(seed).normal(0, 0.01, (int(vis.sum()), 3))
+    return ObservationSet(robot, int(round(t * S)), z, np.tile(np.eye(3) * 1e-4, (len(z), 1, 1)), desc[vis])
+
+
+def _gap_run(truth_after: np.ndarray, **kw) -> tuple[CentralMapper, np.ndarray]:
+    """robot1 drives along x at 0.5 m/s with exact odometry and observations until 2 s, is
+    silent until 10 s (odometry: out to x = 2 and back, 2 m), and is then at ``truth_after``
+    while its odometry says (1, 0, 0)."""
+    from mrslam_core.slam.config import AssociationConfig
+
+    pts, desc = _world()
+    m = CentralMapper(CentralConfig(robots=("robot1",), start_poses=(0.0, 0.0, 0.0),
+                                    filter=FilterConfig(num_particles=50, seed=3, proposal="fastslam2",
+                                                        association=AssociationConfig(descriptor_gate=0.25)), **kw))
+    for i, t in enumerate(np.arange(0.0, 10.01, 0.2)):
+        x = 0.5 * t if t <= 2.0 else 1.0 + np.sin(np.pi * (t - 2.0) / 8.0)
+        m.add_odometry("robot1", int(round(t * S)), np.array([x, 0.0, 0.0]))
+        if t <= 2.0 + 1e-9:
+            m.add_observations(_seen("robot1", t, np.array([0.5 * t, 0.0, 0.0]), pts, desc, i))
+    m.add_observations(_seen("robot1", 10.0, truth_after, pts, desc, 99))
+    done = m.process(flush=True)
+    return m, done[-1].pose
+
+
+def test_a_robot_back_from_a_gap_is_placed_by_its_observations():
+    """Its dead reckoning over the silent 8 s is 0.4 m and 0.1 rad off; the set after the gap,
+    aligned to the map, puts it back (without re-localisation it stays where odometry says)."""
+    truth = np.array([1.0, 0.4, 0.1])
+    m, pose = _gap_run(truth)
+    (e,) = m.relocalizations
+    assert e["accepted"] and e["inliers"] >= 6 and abs(e["gap_s"] - 8.0) < 1e-9 and abs(e["travelled_m"] - 2.0) < 0.01
+    assert np.hypot(*(pose[:2] - truth[:2])) < 0.03 and abs(pose[2] - truth[2]) < 0.01, pose
+    m, pose = _gap_run(truth, relocalize_after=0.0)
+    assert m.relocalizations == [] and np.hypot(*(pose[:2] - truth[:2])) > 0.3, pose
+
+
+def test_a_fit_far_from_dead_reckoning_is_not_used():
+    """1.5 m from where odometry says, more than the gate (0.5 m + 10 % of 2 m) allows: the fit
+    is logged with its reason, the particles stay with the odometry."""
+    truth = np.array([1.0, 1.5, 0.0])
+    m, pose = _gap_run(truth)
+    (e,) = m.relocalizations
+    assert not e["accepted"] and "gate 0.70 m" in e["reason"] and abs(e["shift_m"] - 1.5) < 0.05, e
+    assert np.hypot(*(pose[:2] - [1.0, 0.0])) < 0.3

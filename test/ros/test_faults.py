@@ -1,10 +1,10 @@
-"""Faults in a live team run (config/demo_faults.yaml, 2 robots, 55 simulated s): the central node
+"""Faults in a live team run (config/demo_faults.yaml, 2 robots, 65 simulated s): the central node
 killed with SIGKILL and restarted with --resume from its checkpoint, robot2's frontend stopped for
 30 s (a robot gone silent, then back), robot1's frontend killed and restarted. The run completes,
 the central node resumes where its checkpoint left it, and every robot's ATE stays within 1.5× of
-the same run without faults plus 0.15 m: two live runs of one config differ by up to that much
-(CI: 0.163 m with faults against 0.042 m without; another pair 0.037 m against 0.052 m), so the
-issue's plain 1.5× is not a bound a single pair of live runs can hold yet."""
+the same run without faults. The robots drive a fixed loop steered by their true pose
+(``sim.route``), so both runs see the same images and only the faults differ (with exploration,
+two live runs of one config differed by up to 0.15 m without any fault)."""
 
 import json
 import subprocess
@@ -55,16 +55,16 @@ def test_the_resumed_central_node_kept_the_trajectories_from_before_the_kill(run
     est = np.load(tmp / "faults" / "slam" / "estimates.npz")
     for robot in ("robot1", "robot2"):
         t = est[f"{robot}.t"] * 1e-9
-        assert t.min() < 5.0 and t.max() > 52.0, robot  # from before the kill at 10 s to the end
+        assert t.min() < 5.0 and t.max() > 62.0, robot  # from before the kill at 10 s to the end
         gaps = np.diff(t)
         assert gaps.max() < 35.0
     t2 = est["robot2.t"] * 1e-9
-    # robot2 was silent from 15 s to 45 s: no updates in between, updates again after it came back
-    assert not ((t2 > 17.0) & (t2 < 42.0)).any() and (t2 > 46.0).sum() >= 30
+    # robot2 was silent from 20 s to 50 s: no updates in between, updates again after it came back
+    assert not ((t2 > 22.0) & (t2 < 47.0)).any() and (t2 > 51.0).sum() >= 30
 
 
 def test_accuracy_stays_within_the_bound_of_an_uninterrupted_run(runs):
     _, faulty, clean = runs
     for name, r in faulty["robots"].items():
         base = clean["robots"][name]["ate_rmse_m"]
-        assert r["ate_rmse_m"] <= 1.5 * base + 0.15, (name, r["ate_rmse_m"], base)
+        assert r["ate_rmse_m"] <= 1.5 * base, (name, r["ate_rmse_m"], base)

@@ -73,3 +73,27 @@ def test_params_file_with_nested_keys_ints_for_floats_and_typos(tmp_path):
         node.destroy_node()
     finally:
         rclpy.shutdown()
+
+
+def test_an_empty_float_array_default_takes_a_params_file_list(tmp_path):
+    """sim.route.waypoints defaults to () (no route): declared as a double array, then set."""
+    import rclpy
+    import yaml
+
+    from mrslam_ros.params import declare_config, read_config
+    from mrslam_ros.sim_node import SimNodeConfig
+
+    path = tmp_path / "p.yaml"
+    path.write_text(yaml.safe_dump({"/**": {"ros__parameters": {"sim": {"route": {"waypoints": [1.0, 1.0, 2.0, 1.0, 2.0, 2.5]}}}}}))
+    rclpy.init()
+    try:
+        node = rclpy.create_node("params_empty_default")
+        declare_config(node, SimNodeConfig())
+        assert read_config(node, SimNodeConfig).sim.route.waypoints == ()
+        node.destroy_node()
+        node = rclpy.create_node("params_route", cli_args=["--ros-args", "--params-file", str(path)])
+        declare_config(node, SimNodeConfig())
+        assert read_config(node, SimNodeConfig).sim.route.waypoints == (1.0, 1.0, 2.0, 1.0, 2.0, 2.5)
+        node.destroy_node()
+    finally:
+        rclpy.shutdown()
