@@ -89,7 +89,11 @@ class ExploreNode(Node):
     def control(self) -> None:
         if len(self.poses) < len(self.cfg.robots):
             return  # every robot must have a pose before targets are shared out
+        stalls = self.explorer.stalls
         commands = self.explorer.step(self.grid, self.poses, self.now_ns * 1e-9)
+        if self.explorer.stalls > stalls:
+            self.get_logger().warning(f"a robot stalled (commanded forward, did not move): backing off; "
+                                      f"{self.explorer.stalls} stalls so far")
         clock_ns = self.get_clock().now().nanoseconds
         for robot, (v, w) in commands.items():
             if clock_ns - self.pose_stamps[robot] > self.cfg.pose_timeout * 1e9:

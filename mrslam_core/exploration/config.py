@@ -59,6 +59,14 @@ class ExplorationConfig:
             sensor that sees every obstacle before the robot reaches it). False: only cells
             observed free (for stereo cameras, which cannot see a wall nearer than their near
             limit and would otherwise plan through it once they stand close to it).
+        stall_time: a robot commanded forward for this long (at 0.1 m/s or more on average) that
+            covered less than a quarter of the commanded distance is blocked by something its
+            sensor does not show (a wall nearer than a stereo camera's near limit, a door frame
+            beside it): its goal fails and it backs off at once instead of pushing for
+            ``progress_timeout``, and a disc of radius ``bumper_range / 2`` around the spot
+            ``bumper_range`` ahead of it is an obstacle (inflated by ``robot_radius``) for
+            planning during ``blacklist_period`` (0: off) [s].
+        bumper_range: distance from the robot's centre to the front of its body [m].
     """
 
     coordinated: bool = True
@@ -82,3 +90,5 @@ class ExplorationConfig:
     max_turn_rate: float = 1.2
     lookahead: float = 0.4
     unknown_passable: bool = True
+    stall_time: float = 0.0
+    bumper_range: float = 0.3

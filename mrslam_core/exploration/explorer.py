@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections import deque
 from dataclasses import dataclass, field
 from enum import Enum
 
@@ -37,21 +38,32 @@ def surroundings(grid: OccupancyGrid, xy: np.ndarray, robot_radius: float) -> np
     return (rr - r0) ** 2 + (cc - c0) ** 2 <= (robot_radius / grid.res + 2) ** 2
 
 
-def planning_layers(grid: OccupancyGrid, poses: list[np.ndarray], cfg: ExplorationConfig) -> tuple[np.ndarray, np.ndarray]:
+def bumper_cells(grid: OccupancyGrid, bumps: list[np.ndarray], radius: float) -> np.ndarray:
+    """(H, W) bool: the cells within ``radius`` [m] of a bumper hit, each (x, y) [m] map frame."""
+    out = np.zeros(grid.shape, bool)
+    for xy in bumps:
+        out |= surroundings(grid, xy, radius - 2 * grid.res)
+    return out
+
+
+def planning_layers(grid: OccupancyGrid, poses: list[np.ndarray], cfg: ExplorationConfig,
+                    bumps: list[np.ndarray] = ()) -> tuple[np.ndarray, np.ndarray]:
     """What paths may cross: (passable (H, W) bool for A*, occupancy (H, W) for the travel cost).
 
-    Obstacles are inflated by ``robot_radius``. Without ``unknown_passable`` only cells observed
-    free are passable and unobserved ones cost like obstacles, except within the robot's radius
-    (+ 2 cells) of a robot's pose (x, y, θ): the ground under and just around a robot is never in
-    view, and it must be able to leave it.
+    Obstacles (occupied cells and ``bumps``, see :func:`bumper_cells`) are inflated by
+    ``robot_radius``. Without ``unknown_passable`` only cells observed free are passable and
+    unobserved ones cost like obstacles, except within the robot's radius (+ 2 cells) of a robot's
+    pose (x, y, θ): the ground under and just around a robot is never in view, and it must be able
+    to leave it.
     """
-    prob = grid.probability()
-    passable = ~inflate(grid.occupied(), cfg.robot_radius / grid.res)
+    blocked = grid.occupied() | bumper_cells(grid, list(bumps), cfg.bumper_range / 2)
+    prob = np.where(blocked, 1.0, grid.probability())
+    passable = ~inflate(blocked, cfg.robot_radius / grid.res)
     if not cfg.unknown_passable:
         around = np.zeros(grid.shape, bool)
         for pose in poses:
             around |= surroundings(grid, np.asarray(pose)[:2], cfg.robot_radius)
-        passable &= grid.free() | (around & ~grid.occupied())
+        passable &= grid.free() | (around & ~blocked)
         prob = np.where(grid.observed | around, prob, 1.0)
     return passable, prob
 
@@ -76,6 +88,12 @@ class Explorer:
     checkpoints: dict[str, tuple[np.ndarray, float]] = field(default_factory=dict)
     recovering_until: dict[str, float] = field(default_factory=dict)
     known_at_plan: int = 0
+    #: bumper hits: (x, y) [m] map frame, obstacles for planning until ``bump_until`` [s]
+    bumps: list[np.ndarray] = field(default_factory=list)
+    bump_until: list[float] = field(default_factory=list)
+    stalls: int = 0
+    #: per robot, recent (time [s], x, y, commanded v [m/s]) for the stall check
+    motion: dict[str, deque] = field(default_factory=dict)
 
     def _replan(self, grid: OccupancyGrid, poses: dict[str, np.ndarray], now: float) -> None:
         cfg = self.config
@@ -84,7 +102,7 @@ class Explorer:
         self.plans += 1
         self.last_plan_s = now
         self.known_at_plan = int(grid.observed.sum())
-        passable, prob = planning_layers(grid, [poses[n] for n in self.robots], cfg)
+        passable, prob = planning_layers(grid, [poses[n] for n in self.robots], cfg, self.bumps)
         frontier &= passable  # a frontier the robot cannot stand on (hugging a wall) is not a goal
         waiting = False  # a frontier blocked only for now will be tried again: not complete yet
         if self.blacklist:
@@ -131,7 +149,8 @@ class Explorer:
         # a robot standing closer than its radius to an obstacle may leave through inflated
         # cells around it (never through occupied ones)
         near = surroundings(grid, poses[name][:2], self.config.robot_radius)
-        path = astar(passable | (near & ~grid.occupied()), start, goal)
+        path = astar(passable | (near & ~grid.occupied() & ~bumper_cells(grid, self.bumps, self.config.bumper_range / 2)),
+                     start, goal)
         if path is None:
             self._strike(np.asarray(target, float), now)
             self.goals[name] = None
@@ -152,11 +171,38 @@ class Explorer:
         self.blacklist.append(np.asarray(target, float))
         self.strikes.append([1.0, now + cfg.blacklist_period])
 
+    def _stalled(self, name: str, poses: dict[str, np.ndarray], now: float) -> bool:
+        """Whether ``name`` was commanded forward for ``stall_time`` and did not follow (see
+        :class:`ExplorationConfig`); if so, a bumper hit is recorded ahead of it."""
+        cfg = self.config
+        track = self.motion.get(name)
+        if cfg.stall_time <= 0 or not track or now - track[0][0] < cfg.stall_time:
+            return False
+        t = np.array([e[0] for e in track] + [now])
+        v = np.array([e[3] for e in track])
+        commanded = float(np.sum(np.maximum(v, 0.0) * np.diff(t)))
+        pose = np.asarray(poses[name], float)
+        moved = float(np.hypot(*(pose[:2] - np.array(track[0][1:3]))))
+        if commanded < 0.1 * (now - track[0][0]) or moved >= 0.25 * commanded:
+            return False
+        self.stalls += 1
+        # a robot pressing against another robot has not found a wall
+        if any(np.hypot(*(np.asarray(poses[o])[:2] - pose[:2])) < 2 * cfg.bumper_range + 0.2
+               for o in poses if o != name):
+            track.clear()
+            return True
+        self.bumps.append(pose[:2] + cfg.bumper_range * np.array([np.cos(pose[2]), np.sin(pose[2])]))
+        self.bump_until.append(now + cfg.blacklist_period)
+        track.clear()
+        return True
+
     def step(self, grid: OccupancyGrid, poses: dict[str, np.ndarray], now: float) -> dict[str, tuple[float, float]]:
         """Commands (v [m/s], ω [rad/s]) per robot at time ``now`` [s]."""
         cfg = self.config
         for name in self.robots:
             self.starts.setdefault(name, np.asarray(poses[name], float).copy())
+        live = [i for i, until in enumerate(self.bump_until) if now < until]
+        self.bumps, self.bump_until = [self.bumps[i] for i in live], [self.bump_until[i] for i in live]
         due = now - self.last_plan_s >= cfg.replan_period
         known = int(grid.observed.sum())
         if known - self.known_at_plan > cfg.replan_new_area / grid.res**2 and now - self.last_plan_s >= 1.0:
@@ -173,7 +219,7 @@ class Explorer:
                 self.goals[name] = None
             elif np.linalg.norm(poses[name][:2] - where) > 0.3:
                 self.checkpoints[name] = (poses[name][:2].copy(), now)
-            elif now - since > cfg.progress_timeout:
+            elif now - since > cfg.progress_timeout or self._stalled(name, poses, now):
                 # no headway for a while (blocked, or oscillating): never chase this goal again
                 self._strike(g.target, now)
                 self.goals[name] = None
@@ -195,6 +241,11 @@ class Explorer:
                 continue
             v, w, _ = pure_pursuit(poses[name], g.path, cfg.lookahead, cfg.max_speed, cfg.max_turn_rate)
             commands[name] = (v, w)
+        for name, (v, _) in commands.items():
+            track = self.motion.setdefault(name, deque())
+            track.append((now, *np.asarray(poses[name], float)[:2], v))
+            while len(track) > 2 and track[1][0] <= now - cfg.stall_time:
+                track.popleft()
         if self.state is State.RETURNING and all(
             np.linalg.norm(poses[n][:2] - self.starts[n][:2]) < cfg.goal_tolerance for n in self.robots
         ):

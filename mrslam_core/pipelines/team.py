@@ -151,7 +151,7 @@ def run(cfg: TeamConfig, progress: bool = False) -> dict:
     return {
         "trajectories": trajectories, "update_ms": np.array(step_ms), "landmarks": {"mean": mean, "cov": cov},
         "dropped": dict(slam.dropped), "frontend_drops": {n: dict(f.drops) for n, f in frontends.items()},
-        "explored_fraction": explored, "exploration_state": explorer.state.value,
+        "explored_fraction": explored, "exploration_state": explorer.state.value, "stalls": explorer.stalls,
         "wall_s": time.perf_counter() - wall,
     }
 
@@ -195,7 +195,7 @@ def main(argv: list[str]) -> int:
     report = write_run(args.out, res["trajectories"], cfg, res["update_ms"], res["landmarks"],
                        extra={"explored_fraction": res["explored_fraction"], "dropped": res["dropped"],
                               "frontend_drops": res["frontend_drops"], "wall_s": res["wall_s"],
-                              "exploration_state": res["exploration_state"]})
+                              "exploration_state": res["exploration_state"], "stalls": res["stalls"]})
     for name, r in report["robots"].items():
         print(f"  {name}: ATE {r['ate_rmse_m']:.3f} m (odometry {r['odom_ate_rmse_m']:.3f} m), RPE {r['rpe_rmse_m']:.3f} m")
     u = report["update_ms"]

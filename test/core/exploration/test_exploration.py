@@ -136,3 +136,52 @@ def test_paths_through_unobserved_cells_only_where_allowed(unknown_passable):
         far = np.linalg.norm(xy - robot[:2], axis=1) > cfg.robot_radius + 0.2
         assert grid.observed[tuple(path[far].T)].all()  # seen cells only, beyond the robot's own surroundings
         assert prob[20, 5] == 1.0 and prob[6, 6] < 0.1  # unobserved costs like an obstacle
+
+
+def _open_room() -> OccupancyGrid:
+    """6 m × 4 m, the west 4 m observed free, the rest unknown: a frontier along x = 4 m."""
+    grid = OccupancyGrid(GridConfig(resolution=0.1, size=(6.0, 4.0), origin=(0.0, 0.0)))
+    grid.observed[:, :40] = True
+    grid.logodds[:, :40] = -3.0
+    return grid
+
+
+def test_a_stalled_robot_marks_a_bumper_hit_backs_off_and_plans_around_it():
+    """A robot at (0.5, 2.0) facing east, commanded forward, does not move (an unseen wall): after
+    stall_time it backs off, its goal has failed once, the spot 0.3 m ahead of it is an obstacle
+    until blacklist_period has passed, and its next path to the frontier goes round it."""
+    from mrslam_core.exploration.explorer import Explorer, planning_layers
+
+    grid = _open_room()
+    cfg = ExplorationConfig(robot_radius=0.2, stall_time=1.5, bumper_range=0.3, min_target_distance=0.5)
+    ex = Explorer(cfg, ["r"])
+    pose = np.array([0.5, 2.0, 0.0])
+    cmds = [ex.step(grid, {"r": pose}, 0.2 * i)["r"] for i in range(9)]  # 0 … 1.6 s
+    assert all(v > 0.1 for v, _ in cmds[:8]), cmds
+    assert cmds[8] == (-cfg.recovery_speed, 0.0)  # stalled at 1.6 s (> 1.5 s commanded): backs off
+    assert len(ex.bumps) == 1 and ex.strikes[0][0] == 1
+    np.testing.assert_allclose(ex.bumps[0], [0.8, 2.0])
+    passable, prob = planning_layers(grid, [pose], cfg, ex.bumps)
+    assert not passable[grid.cell_of(np.array([0.8, 2.0]))[0], 8] and prob[20, 8] == 1.0
+    t = 0.2 * 9
+    while t < cfg.recovery_time + 2.0:
+        ex.step(grid, {"r": pose}, t)
+        t += 0.2
+    goal = ex.goals["r"]
+    assert goal is not None
+    d = np.linalg.norm(goal.path - ex.bumps[0], axis=1)
+    assert d.min() >= cfg.bumper_range / 2, d.min()  # round the bumper hit, not through it
+    ex.step(grid, {"r": pose}, 1.6 + cfg.blacklist_period)
+    assert ex.bumps == []
+
+
+def test_a_robot_that_follows_its_commands_never_stalls():
+    from mrslam_core.exploration.explorer import Explorer
+
+    grid = _open_room()
+    ex = Explorer(ExplorationConfig(robot_radius=0.2, min_target_distance=0.5, stall_time=1.5), ["r"])
+    pose = np.array([0.5, 2.0, 0.0])
+    for i in range(40):
+        v, w = ex.step(grid, {"r": pose}, 0.2 * i)["r"]
+        pose = pose + 0.2 * np.array([v * np.cos(pose[2]), v * np.sin(pose[2]), w])
+    assert ex.bumps == [] and ex.strikes == [] and pose[0] > 2.0
