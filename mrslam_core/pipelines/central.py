@@ -246,7 +246,7 @@ class CentralMapper:
         gap = (obs.stamp_ns - seen) * 1e-9
         tried = self._reloc_tried.get(obs.robot, seen)
         if (filt is self.slam and 0 < self.cfg.relocalize_after < gap and obs.stamp_ns - tried >= 1e9
-                and self.cfg.filter.observation_model == "stereo_point" and len(obs)):
+                and self.cfg.filter.observation_model == "stereo_point" and len(obs) >= self.cfg.fusion.min_inliers):
             self._reloc_tried[obs.robot] = obs.stamp_ns
             if self._relocalize(obs, motion, gap, self._path_length(obs.robot, seen, obs.stamp_ns)):
                 motion = np.zeros(3)  # the particles are at this stamp already
@@ -294,9 +294,14 @@ class CentralMapper:
         entry = {"robot": obs.robot, "stamp_ns": int(obs.stamp_ns), "gap_s": gap, "travelled_m": travelled,
                  "accepted": False}
         self.relocalizations.append(entry)
+        limit = self.cfg.relocalize_gate + self.cfg.relocalize_drift * travelled
         try:
             frame = LandmarkMap(obs.z, obs.cov, obs.descriptors)
-            al = ransac_align(LandmarkMap.from_filter(slam), frame, self.cfg.fusion)
+            world = LandmarkMap.from_filter(slam)
+            # only landmarks the robot can see from anywhere within the gate: fewer look-alikes
+            reach = limit + float(np.linalg.norm(obs.z[:, :2], axis=1).max()) + self.cfg.fusion.inlier_distance
+            world = world.subset(np.flatnonzero(np.linalg.norm(world.means[:, :2] - dead[:2], axis=1) <= reach))
+            al = ransac_align(world, frame, self.cfg.fusion)
         except FusionError as exc:
             entry["reason"] = str(exc)
             return False
@@ -305,7 +310,6 @@ class CentralMapper:
             return False
         shift = float(np.hypot(*(al.transform[:2] - dead[:2])))
         entry["shift_m"] = shift
-        limit = self.cfg.relocalize_gate + self.cfg.relocalize_drift * travelled
         if shift > limit:
             entry["reason"] = f"the fit is {shift:.2f} m from the dead-reckoned pose (gate {limit:.2f} m)"
             return False
