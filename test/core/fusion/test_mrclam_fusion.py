@@ -16,10 +16,14 @@ from mrslam_core.pipelines.mrclam import run as run_known_start
 @pytest.mark.slow
 def test_unknown_start_robots_are_merged_and_tracked(mrclam6):
     """First 300 s, M = 300, seed 0 (~60 s: the unknown-start run and the known-start run).
-    Measured: robot 3 joins by rendezvous with robot 1 at 17.6 s, robots 2 and 5 by map alignment
-    at 35 s, robot 4 at 75 s; ATE after the merge 0.25–0.31 m (robot 1: 0.20 m) against
-    0.13–0.22 m with every start pose known (ratios 1.34–1.67); team-aligned 0.15–0.23 m; dead
-    reckoning from the TRUE start pose over the same windows 0.58–1.13 m."""
+    Measured: robot 3's first mutual sighting with robot 1 (17.6 s) is held and the second
+    (17.8 s) confirms it; robots 2 and 5 join by map alignment at 35 s, robot 4 at 70 s; ATE after
+    the merge 0.19–0.31 m (robot 1: 0.23 m) against 0.13–0.22 m with every start pose known
+    (ratios 1.25–1.79, robot 1 the highest: the team frame); team-aligned 0.13–0.21 m, 1.00–1.10×
+    the known-start run's team-aligned ATE; dead reckoning from the TRUE start pose over the same
+    windows 0.57–1.13 m. On full runs (900 s, M = 500, 10 seeds) the team-aligned ratio is
+    ≤ 1.50 for all 50 robot-runs, the unaligned one ≤ 1.61 (docs/fusion.md), so the unaligned
+    bound here stays 2×."""
     ds = MrclamDataset(mrclam6)
     cfg = MrclamFusionConfig()
     cfg = replace(cfg, mrclam=replace(cfg.mrclam, duration=300.0, filter=replace(cfg.mrclam.filter, num_particles=300)))
@@ -28,9 +32,12 @@ def test_unknown_start_robots_are_merged_and_tracked(mrclam6):
     merged = res["merged"]
     assert sorted(merged) == ["robot2", "robot3", "robot4", "robot5"], res["attempts"]
     assert merged["robot3"]["via"].startswith("rendezvous") and merged["robot3"]["time_s"] < 30
+    # one mutual sighting is held, not trusted: robot 3 joins on the second that agrees
+    assert any("held until a second one" in a for a in res["attempts"]["robot3"]), res["attempts"]["robot3"]
     t0 = res["times"][0]
     first = {"robot1": 0, **{r: m["step"] for r, m in merged.items()}}
     free, _ = gauge_free(res["est"], res["gt"], first)
+    free_known, _ = gauge_free({r: known[r]["est"] for r in res["gt"]}, res["gt"], first)
     raw, odo = {}, {}
     for r, k in first.items():
         if r != "robot1":
@@ -46,5 +53,7 @@ def test_unknown_start_robots_are_merged_and_tracked(mrclam6):
             ds.groundtruth(i, np.array([t0]))[0], res["times"])
         odo[r] = ate_rmse(dead[k:], res["gt"][r][k:])
         assert raw[r] < 0.4 and free[r] < 0.25 and raw[r] < 2.0 * ref, (r, raw[r], free[r], ref)
+        # each robot's own error (the team frame removed in both runs) within 1.5x of the known start
+        assert free[r] < 1.5 * free_known[r], (r, free[r], free_known[r])
     # far better than dead reckoning that even knows the true start pose
     assert np.mean(list(raw.values())) < 0.45 * np.mean(list(odo.values())), (raw, odo)
