@@ -45,6 +45,12 @@ class CentralConfig:
         unknown_start: robots whose start pose is unknown (their ``start_poses`` entries are not
             used); if every robot is listed, the first one's start pose defines the map frame.
         merge_every: updates of a robot with an unknown start between attempts to align its map.
+        sample_gap: when a robot's previous update is older than this, its motion up to 0.2 s
+            before the set is applied first without observations (each particle draws its own
+            motion noise), then the rest with the set: the particles then associate the set
+            from distinct poses, where a FastSLAM 2.0 proposal from the one predicted pose of a
+            long motion follows whatever the set matches there (a restart of the central node,
+            a frame dropped by a slow frontend); 0: never [s].
         relocalize_after: a robot whose previous update is older than this (it went silent:
             a link down, a frontend restarted) is placed by its observations instead of by its
             odometry over the gap: its observation set is aligned to the best particle's map
@@ -68,6 +74,7 @@ class CentralConfig:
     max_queue: int = 200
     unknown_start: tuple[str, ...] = ()
     merge_every: int = 10
+    sample_gap: float = 1.0
     relocalize_after: float = 5.0
     relocalize_min_associations: int = 0
     relocalize_gate: float = 0.5
@@ -250,6 +257,14 @@ class CentralMapper:
             self._reloc_tried[obs.robot] = obs.stamp_ns
             if self._relocalize(obs, motion, gap, self._path_length(obs.robot, seen, obs.stamp_ns)):
                 motion = np.zeros(3)  # the particles are at this stamp already
+        if prev is not None and 0 < self.cfg.sample_gap < (obs.stamp_ns - prev[0]) * 1e-9 and motion.any():
+            mid_ns = obs.stamp_ns - 200_000_000
+            mid = interpolate_poses(np.array([float(mid_ns)]), t, poses)[0] if mid_ns > buf[0][0] else reference
+            try:
+                filt.step([RobotUpdate(obs.robot, mid_ns, between(reference, mid), None)])
+                motion = between(mid, odom)
+            except FilterInputError:
+                pass
         try:
             result = filt.step([RobotUpdate(obs.robot, obs.stamp_ns, motion, obs)])
         except FilterInputError:

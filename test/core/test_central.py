@@ -281,3 +281,25 @@ def test_a_fit_far_from_dead_reckoning_is_not_used():
     (e,) = m.relocalizations
     assert not e["accepted"] and "gate 0.70 m" in e["reason"] and abs(e["shift_m"] - 1.5) < 0.05, e
     assert np.hypot(*(pose[:2] - [1.0, 0.0])) < 0.3
+
+
+def test_the_motion_over_a_gap_is_sampled_before_the_set_is_associated():
+    """A set 3 s after the robot's previous one: the filter first moves the robot without
+    observations to 0.2 s before the set (each particle draws its own noise), then applies the
+    set with the last 0.2 s of motion; the two parts compose to the odometry exactly."""
+    from mrslam_core.slam.config import MotionConfig
+
+    still = MotionConfig(alpha1=0.0, alpha2=0.0, alpha3=0.0, alpha4=0.0)
+    for gap_rule, steps in ((1.0, 2), (0.0, 1)):
+        m = CentralMapper(_cfg(robots=("robot1",), start_poses=(0.0, 0.0, 0.0), sample_gap=gap_rule,
+                               filter=FilterConfig(num_particles=20, seed=3, motion=still)))
+        for t in np.arange(0.0, 4.01, 0.1):
+            m.add_odometry("robot1", int(round(t * S)), np.array([0.5 * t, 0.1 * t, 0.2 * t]))
+        m.add_observations(_obs("robot1", 0.2))
+        m.process()
+        before = m.slam.steps
+        m.add_observations(_obs("robot1", 3.2))
+        (done,) = m.process(flush=True)
+        assert m.slam.steps - before == steps
+        np.testing.assert_allclose(done.pose, [1.6, 0.32, 0.64], atol=1e-9)
+        assert m.slam.last_stamp["robot1"] == int(3.2 * S)
