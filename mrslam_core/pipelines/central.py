@@ -301,11 +301,7 @@ class CentralMapper:
         from mrslam_core.geometry.se2 import compose, wrap_angle
 
         slam, k = self.slam, self.slam.index[obs.robot]
-        w = np.exp(slam.log_w - slam.log_w.max())
-        w /= w.sum()
-        mean = slam.poses[:, k]
-        th = np.arctan2(w @ np.sin(mean[:, 2]), w @ np.cos(mean[:, 2]))
-        dead = compose(np.array([w @ mean[:, 0], w @ mean[:, 1], th]), motion)
+        dead = compose(slam.estimate().mean[k], motion)
         entry = {"robot": obs.robot, "stamp_ns": int(obs.stamp_ns), "gap_s": gap, "travelled_m": travelled,
                  "accepted": False}
         self.relocalizations.append(entry)
