@@ -56,6 +56,9 @@ class CentralConfig:
             odometry over the gap: its observation set is aligned to the best particle's map
             (descriptor matches, RANSAC and least squares, ``fusion`` thresholds) and its
             particles drawn from the fit (stereo points only); 0: never [s].
+        relocalize_tries: attempts, one a second, before a robot back from a gap is left to
+            its odometry (a frame whose matches are bunched up cannot fix the rotation); its
+            sets in between move it by odometry only and are counted, not mapped.
         relocalize_min_associations: an update in which the robot's observations were matched
             to fewer landmarks than this (mean over the particles) did not show it the map: the
             gap of ``relocalize_after`` runs from its last update that did (a robot facing a
@@ -76,6 +79,7 @@ class CentralConfig:
     merge_every: int = 10
     sample_gap: float = 1.0
     relocalize_after: float = 5.0
+    relocalize_tries: int = 3
     relocalize_min_associations: int = 0
     relocalize_gate: float = 0.5
     relocalize_drift: float = 0.1
@@ -147,6 +151,7 @@ class CentralMapper:
         self._last: dict[str, tuple[int, np.ndarray]] = {}
         self._saw_map: dict[str, int] = {}  # stamp of each robot's last update that matched the map
         self._reloc_tried: dict[str, int] = {}
+        self._returning: dict[str, int] = {}  # robots back from a gap: re-localisation attempts left
         self._wait_ns = int(cfg.max_wait * 1e9)
         self.now_ns = 0  # newest observation stamp received
         self._first_ns: int | None = None
@@ -255,8 +260,14 @@ class CentralMapper:
         if (filt is self.slam and 0 < self.cfg.relocalize_after < gap and obs.stamp_ns - tried >= 1e9
                 and self.cfg.filter.observation_model == "stereo_point" and len(obs) >= self.cfg.fusion.min_inliers):
             self._reloc_tried[obs.robot] = obs.stamp_ns
+            left = self._returning.get(obs.robot, self.cfg.relocalize_tries) - 1
             if self._relocalize(obs, motion, gap, self._path_length(obs.robot, seen, obs.stamp_ns)):
                 motion = np.zeros(3)  # the particles are at this stamp already
+                left = 0
+            if left > 0:
+                self._returning[obs.robot] = left  # the gap stays open: try again a second later
+            else:
+                self._returning.pop(obs.robot, None)
         if prev is not None and 0 < self.cfg.sample_gap < (obs.stamp_ns - prev[0]) * 1e-9 and motion.any():
             mid_ns = obs.stamp_ns - 200_000_000
             mid = interpolate_poses(np.array([float(mid_ns)]), t, poses)[0] if mid_ns > buf[0][0] else reference
@@ -265,12 +276,16 @@ class CentralMapper:
                 motion = between(mid, odom)
             except FilterInputError:
                 pass
+        held = obs.robot in self._returning  # its pose is in doubt: its set must not shape the map
+        if held:
+            self.drops["awaiting_relocalization"] += 1
         try:
-            result = filt.step([RobotUpdate(obs.robot, obs.stamp_ns, motion, obs)])
+            result = filt.step([RobotUpdate(obs.robot, obs.stamp_ns, motion, None if held else obs)])
         except FilterInputError:
             self.drops["bad_observations"] += 1
             return None
-        if result.associated >= self.cfg.relocalize_min_associations * filt.num_particles:
+        if (result.associated >= self.cfg.relocalize_min_associations * filt.num_particles
+                and obs.robot not in self._returning):
             self._saw_map[obs.robot] = obs.stamp_ns
         ms = (time.perf_counter() - t0) * 1e3
         self.update_ms.append(ms)

@@ -303,3 +303,27 @@ def test_the_motion_over_a_gap_is_sampled_before_the_set_is_associated():
         assert m.slam.steps - before == steps
         np.testing.assert_allclose(done.pose, [1.6, 0.32, 0.64], atol=1e-9)
         assert m.slam.last_stamp["robot1"] == int(3.2 * S)
+
+
+def test_a_robot_back_from_a_gap_gets_more_than_one_try():
+    """The first set after the gap holds only 7 landmarks bunched together (no fit); the next
+    one, a second later, is complete: that one re-localises the robot."""
+    pts, desc = _world()
+    truth = np.array([1.0, 0.4, 0.1])
+    m = CentralMapper(CentralConfig(robots=("robot1",), start_poses=(0.0, 0.0, 0.0),
+                                    filter=FilterConfig(num_particles=50, seed=3, proposal="fastslam2")))
+    for i, t in enumerate(np.arange(0.0, 11.01, 0.2)):
+        x = 0.5 * t if t <= 2.0 else 1.0 + np.sin(np.pi * min(t - 2.0, 8.0) / 8.0)
+        m.add_odometry("robot1", int(round(t * S)), np.array([x, 0.0, 0.0]))
+        if t <= 2.0 + 1e-9:
+            m.add_observations(_seen("robot1", t, np.array([0.5 * t, 0.0, 0.0]), pts, desc, i))
+    full = _seen("robot1", 10.0, truth, pts, desc, 99)
+    bunch = np.argsort(np.linalg.norm(full.z - full.z[0], axis=1))[:7]
+    m.add_observations(ObservationSet("robot1", full.stamp_ns, full.z[bunch], full.cov[bunch], full.descriptors[bunch]))
+    for t in (10.4, 10.8):  # a lost robot is left to its odometry between tries
+        m.add_observations(_seen("robot1", t, truth, pts, desc, int(t * 10)))
+    m.add_observations(_seen("robot1", 11.0, truth, pts, desc, 110))
+    done = m.process(flush=True)
+    first, second = m.relocalizations
+    assert not first["accepted"] and second["accepted"] and second["stamp_ns"] == 11 * S, m.relocalizations
+    assert np.hypot(*(done[-1].pose[:2] - truth[:2])) < 0.03, done[-1].pose
