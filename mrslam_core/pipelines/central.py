@@ -59,10 +59,6 @@ class CentralConfig:
         relocalize_tries: attempts, one a second, before a robot back from a gap is left to
             its odometry (a frame whose matches are bunched up cannot fix the rotation); its
             sets in between move it by odometry only and are counted, not mapped.
-        relocalize_min_associations: an update in which the robot's observations were matched
-            to fewer landmarks than this (mean over the particles) did not show it the map: the
-            gap of ``relocalize_after`` runs from its last update that did (a robot facing a
-            blank wall is as lost as a silent one); 0: only silence counts.
         relocalize_gate: the fit is used only within this distance of the dead-reckoned pose,
             plus ``relocalize_drift`` times the distance driven during the gap [m].
         relocalize_drift: see ``relocalize_gate`` [m/m].
@@ -80,7 +76,6 @@ class CentralConfig:
     sample_gap: float = 1.0
     relocalize_after: float = 5.0
     relocalize_tries: int = 3
-    relocalize_min_associations: int = 0
     relocalize_gate: float = 0.5
     relocalize_drift: float = 0.1
     filter: FilterConfig = field(default_factory=FilterConfig)
@@ -149,9 +144,9 @@ class CentralMapper:
         self._seq = 0
         self._latest_obs: dict[str, int] = {}
         self._last: dict[str, tuple[int, np.ndarray]] = {}
-        self._saw_map: dict[str, int] = {}  # stamp of each robot's last update that matched the map
         self._reloc_tried: dict[str, int] = {}
-        self._returning: dict[str, int] = {}  # robots back from a gap: re-localisation attempts left
+        #: robots back from a gap, not re-localised yet: (attempts left, stamp the gap began)
+        self._returning: dict[str, tuple[int, int]] = {}
         self._wait_ns = int(cfg.max_wait * 1e9)
         self.now_ns = 0  # newest observation stamp received
         self._first_ns: int | None = None
@@ -254,18 +249,19 @@ class CentralMapper:
         filt = self.local.get(obs.robot, self.slam)
         t0 = time.perf_counter()
         motion = between(reference, odom)
-        seen = self._saw_map.get(obs.robot, obs.stamp_ns if prev is None else prev[0])
+        seen = self._returning[obs.robot][1] if obs.robot in self._returning else (
+            obs.stamp_ns if prev is None else prev[0])
         gap = (obs.stamp_ns - seen) * 1e-9
         tried = self._reloc_tried.get(obs.robot, seen)
         if (filt is self.slam and 0 < self.cfg.relocalize_after < gap and obs.stamp_ns - tried >= 1e9
                 and self.cfg.filter.observation_model == "stereo_point" and len(obs) >= self.cfg.fusion.min_inliers):
             self._reloc_tried[obs.robot] = obs.stamp_ns
-            left = self._returning.get(obs.robot, self.cfg.relocalize_tries) - 1
+            left = self._returning.get(obs.robot, (self.cfg.relocalize_tries, seen))[0] - 1
             if self._relocalize(obs, motion, gap, self._path_length(obs.robot, seen, obs.stamp_ns)):
                 motion = np.zeros(3)  # the particles are at this stamp already
                 left = 0
             if left > 0:
-                self._returning[obs.robot] = left  # the gap stays open: try again a second later
+                self._returning[obs.robot] = (left, seen)  # the gap stays open: try again a second later
             else:
                 self._returning.pop(obs.robot, None)
         if prev is not None and 0 < self.cfg.sample_gap < (obs.stamp_ns - prev[0]) * 1e-9 and motion.any():
@@ -280,13 +276,10 @@ class CentralMapper:
         if held:
             self.drops["awaiting_relocalization"] += 1
         try:
-            result = filt.step([RobotUpdate(obs.robot, obs.stamp_ns, motion, None if held else obs)])
+            filt.step([RobotUpdate(obs.robot, obs.stamp_ns, motion, None if held else obs)])
         except FilterInputError:
             self.drops["bad_observations"] += 1
             return None
-        if (result.associated >= self.cfg.relocalize_min_associations * filt.num_particles
-                and obs.robot not in self._returning):
-            self._saw_map[obs.robot] = obs.stamp_ns
         ms = (time.perf_counter() - t0) * 1e3
         self.update_ms.append(ms)
         self._last[obs.robot] = (obs.stamp_ns, odom)
