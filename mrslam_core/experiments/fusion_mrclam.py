@@ -175,17 +175,27 @@ def run_unknown_start(ds: MrclamDataset, cfg: MrclamFusionConfig, progress: bool
     def record(i: int, k: int, transform: np.ndarray, joined, via: str, inliers: int, matches: int, rmse: float) -> None:
         """Robot i joined the central filter at step k: log it and move it out of ``local``."""
         dt, dth = alignment_error(transform, starts[i])
+        # the joined robot's pose: weighted mean against Vicon now, and the particles' own spread
+        w = np.exp(central.log_w - np.logaddexp.reduce(central.log_w))
+        p = central.poses[:, central.index[name[i]]]
+        mean = w @ p[:, :2]
+        sd = float(np.sqrt(w @ ((p[:, :2] - mean) ** 2).sum(1)))
+        truth = ds.groundtruth(i, times[k:k + 1])[0]
         merged[name[i]] = {
             "step": k, "time_s": float(times[k] - t0), "transform": np.asarray(transform).tolist(), "via": via,
             "inliers": inliers, "matches": matches, "rmse_m": rmse,
             "start_error_m": dt, "start_error_deg": float(np.degrees(dth)),
             "fused": joined.fused, "added": joined.added, "dropped": joined.dropped,
+            "join_pose_error_m": float(np.linalg.norm(mean - truth[:2])), "join_pose_sd_m": sd,
+            "local_ancestors": int(np.unique(joined.ancestors[:, 1]).size),
         }
         del local[i]
         in_central.append(i)
         if progress:
             print(f"  merged {name[i]} at {times[k] - t0:.1f} s by {via} ({inliers} inliers), "
-                  f"start pose error {dt:.3f} m {np.degrees(dth):.2f}°", file=sys.stderr, flush=True)
+                  f"start pose error {dt:.3f} m {np.degrees(dth):.2f}°; joined pose "
+                  f"{merged[name[i]]['join_pose_error_m']:.3f} m off, particle spread {sd:.3f} m "
+                  f"({merged[name[i]]['local_ancestors']} local ancestors)", file=sys.stderr, flush=True)
 
     step_ms = []
     report_every = max(nsteps // 10, 1)
@@ -329,6 +339,10 @@ def main(argv: list[str]) -> int:
                     help="where a map join puts the alignment's covariance (FusionConfig.transform_uncertainty)")
     ap.add_argument("--single-sighting", action="store_true",
                     help="join on one mutual sighting, without waiting for a second one that agrees")
+    ap.add_argument("--rendezvous-anchor", action="store_true",
+                    help="rendezvous joins anchored on each particle's own poses (FusionConfig.rendezvous_anchor)")
+    ap.add_argument("--pair-draw", choices=["grid", "product"],
+                    help="how a join draws its (central, local) ancestor pairs (FusionConfig.pair_draw)")
     ap.add_argument("--out", default="runs/experiments")
     args = ap.parse_args(argv)
     ds = MrclamDataset(args.folder)
@@ -341,6 +355,10 @@ def main(argv: list[str]) -> int:
         base = replace(base, fusion=replace(base.fusion, pair_likelihood=True))
     if args.join_uncertainty:
         base = replace(base, fusion=replace(base.fusion, transform_uncertainty=args.join_uncertainty))
+    if args.rendezvous_anchor:
+        base = replace(base, fusion=replace(base.fusion, rendezvous_anchor=True))
+    if args.pair_draw:
+        base = replace(base, fusion=replace(base.fusion, pair_draw=args.pair_draw))
     if args.single_sighting:
         base = replace(base, fusion=replace(base.fusion, rendezvous_window=None))
     mc = base.mrclam

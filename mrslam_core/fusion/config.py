@@ -88,6 +88,20 @@ class FusionConfig:
             None trusts a single sighting.
         rendezvous_gate: probability of the χ²(3) quantile below which two sightings' transforms
             agree (Mahalanobis distance with the sum of their covariances).
+        rendezvous_anchor: a rendezvous join places the robot per joined particle relative to
+            that particle's own pose of the seen robot, with the sighting's noise drawn per
+            particle, and moves each local particle's map with its own pose
+            (:func:`~mrslam_core.fusion.rendezvous.anchored_transforms`); False draws one
+            transform per particle from N(T, Cov T) around the weighted means.
+        pair_draw: how a join draws its M (central, local) ancestor pairs from the M × L pairs
+            weighted w_c·w_l: ``grid`` — systematic resampling over the ravelled pair grid (004
+            section 5 read literally); its draws are 1/M apart in cumulative weight, so with
+            equal central weights every draw lands at the same offset inside its central
+            particle's block, i.e. on ONE local particle (MR.CLAM: robot 5 at 35 s joined with 1
+            of its 500 local particles) — or ``product``: each side by systematic resampling
+            from its own weights, the local draws paired in random order
+            (:func:`~mrslam_core.fusion.join.draw_pairs`; the product factorises, so this is
+            the same distribution with every local particle represented by its weight).
     """
 
     descriptor_threshold: float = 0.5
@@ -118,6 +132,8 @@ class FusionConfig:
     min_pair_spread: float | None = None
     rendezvous_window: float | None = 10.0
     rendezvous_gate: float = 0.99
+    rendezvous_anchor: bool = False
+    pair_draw: Literal["grid", "product"] = "grid"
 
     def __post_init__(self) -> None:
         if self.ransac_iterations < 1 or self.refine_iterations < 0:

@@ -22,6 +22,7 @@ replaced.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -145,6 +146,25 @@ def systematic_draw(log_w: np.ndarray, n: int, rng: np.random.Generator) -> np.n
     return np.searchsorted(cdf, u, side="right").clip(0, log_w.size - 1)
 
 
+def draw_pairs(log_w_c: np.ndarray, log_w_l: np.ndarray, n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """``n`` (central, local) ancestor pairs from the product weights w_c·w_l: each side drawn
+    by systematic resampling from its own weights, the local draws paired in random order.
+
+    The product factorises, so this draws from it with the marginals of low-variance
+    resampling. (Systematic resampling over the ravelled M × L pair grid instead, as 004's
+    "B × B pairs resampled to B" reads literally, spaces the n draws 1/n apart in cumulative
+    weight: with equal central weights every draw falls at the same offset inside its central
+    particle's block, i.e. on ONE local particle — on MR.CLAM robot 5 joined at 35 s with 1
+    of its 500 local particles.)
+
+    Returns:
+        ((n,) central indices, sorted; (n,) local indices).
+    """
+    anc_c = systematic_draw(normalise_log_weights(np.asarray(log_w_c, float)), n, rng)
+    anc_l = systematic_draw(normalise_log_weights(np.asarray(log_w_l, float)), n, rng)
+    return anc_c, anc_l[rng.permutation(n)]
+
+
 def join_filters(
     central: MultiRobotFastSLAM,
     local: MultiRobotFastSLAM,
@@ -157,6 +177,7 @@ def join_filters(
     transform_cov: np.ndarray | None = None,
     per_pair: bool = False,
     pose_cov: np.ndarray | None = None,
+    pair_transforms: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None,
 ) -> JoinResult:
     """Join ``local`` (K = 1) into ``central`` particle by particle (004 section 5).
 
@@ -185,6 +206,11 @@ def join_filters(
             With ``config.transform_uncertainty = "proposal"`` and no per-particle sampling
             (``transform_cov`` None) it is also added to the robot's pending motion covariance
             and, at each landmark's position, to the moved local landmarks' covariances.
+        pair_transforms: ``f(anc_c (M,), anc_l (M,)) -> (M, 3)``: each drawn pair's own
+            transform from its central and local ancestors (a rendezvous anchored per particle,
+            :func:`mrslam_core.fusion.rendezvous.anchored_transforms`); replaces the refit and
+            the sampling from ``transform_cov``, and counts as sampled (nothing goes into the
+            proposal or the landmarks' covariances on top).
 
     In the per-pair refit, a pair whose own matched landmarks lie within
     ``config.min_pair_spread`` (default ``min_spread``) of their centroid keeps ``transform``.
@@ -198,17 +224,21 @@ def join_filters(
     pairs = np.asarray(pairs, np.int64).reshape(-1, 2)
     name = robot or local.robots[0]
     kl = local.index.get(name, 0)
-    m, n_l = central.num_particles, local.num_particles
+    m = central.num_particles
     cs, ls = pairs[:, 0], pairs[:, 1]
 
-    log_pair = central.log_w[:, None] + local.log_w[None, :]
-    draw = systematic_draw(normalise_log_weights(log_pair.ravel()), m, central.rng)
-    anc_c, anc_l = draw // n_l, draw % n_l
+    if config.pair_draw == "product":
+        anc_c, anc_l = draw_pairs(central.log_w, local.log_w, m, central.rng)
+    else:
+        n_l = local.num_particles
+        log_pair = central.log_w[:, None] + local.log_w[None, :]
+        draw = systematic_draw(normalise_log_weights(log_pair.ravel()), m, central.rng)
+        anc_c, anc_l = draw // n_l, draw % n_l
 
     # per particle transform: refitted on the pair's own copies of the matched landmarks
     # (each central particle's map may sit slightly differently), or one for all
     t_all = np.broadcast_to(t, (m, 3)).copy()
-    if per_pair and len(pairs) >= 2:
+    if per_pair and len(pairs) >= 2 and pair_transforms is None:
         mc, ec = cs_store.gather(anc_c[:, None], cs[None], ("mean", "exists"))
         ml, el = ls_store.gather(anc_l[:, None], ls[None], ("mean", "exists"))
         w = (ec & el).astype(float)
@@ -221,7 +251,9 @@ def join_filters(
         ok &= spread >= min_pair_spread
         if ok.any():
             t_all[ok] = rigid_transform_2d(ml[ok, :, :2], mc[ok, :, :2], w[ok])
-    if transform_cov is not None and np.isfinite(transform_cov).all():
+    if pair_transforms is not None:
+        t_all = np.asarray(pair_transforms(anc_c, anc_l), float).reshape(m, 3)
+    elif transform_cov is not None and np.isfinite(transform_cov).all():
         chol = np.linalg.cholesky(0.5 * (transform_cov + transform_cov.T) + 1e-12 * np.eye(3))
         t_all += central.rng.standard_normal((m, 3)) @ chol.T
     # the drawn pairs weighted by how well their matched landmarks agree once moved by their own
@@ -239,7 +271,7 @@ def join_filters(
     central.select_particles(anc_c, central.score[anc_c] + local.score[anc_l])
     central.log_w = normalise_log_weights(pair_ll)
     stamp = local.last_stamp.get(local.robots[kl])
-    sampled = transform_cov is not None and np.isfinite(transform_cov).all()
+    sampled = pair_transforms is not None or (transform_cov is not None and np.isfinite(transform_cov).all())
     to_proposal = config.transform_uncertainty == "proposal" and not sampled and pose_cov is not None
     lm_cov = pose_cov if to_proposal and np.isfinite(pose_cov).all() else None
     drift, pending = _moved_pose_covariances(local, kl, t, transform_cov if pose_cov is None else pose_cov, to_proposal)

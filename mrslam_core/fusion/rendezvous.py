@@ -48,6 +48,7 @@ class Rendezvous:
         transform_cov: (3, 3) its covariance (sightings plus j's pose covariance).
         range_nis: (r_ij − r_ji)² / (var r_ij + var r_ji), the two robots' ranges against each
             other (χ²(1) for correct readings; 0 when not known).
+        seen: name of the seen robot j in the common filter ("" when not known).
     """
 
     relative: np.ndarray
@@ -55,6 +56,7 @@ class Rendezvous:
     transform: np.ndarray
     transform_cov: np.ndarray
     range_nis: float = 0.0
+    seen: str = ""
 
 
 def relative_pose(z_ij: np.ndarray, z_ji: np.ndarray, cov_ij: np.ndarray, cov_ji: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -118,7 +120,45 @@ def sighting_transform(
     rel, rel_cov = relative_pose(z_ij, z_ji, cov_ij, cov_ji)
     rv = rendezvous_transform(est_c.mean[j], est_c.cov[j], est_l.mean[0], rel, rel_cov)
     nis = float((z_ij[0] - z_ji[0]) ** 2 / (cov_ij[0, 0] + cov_ji[0, 0]))
-    return replace(rv, range_nis=nis)
+    return replace(rv, range_nis=nis, seen=seen)
+
+
+def anchored_transforms(
+    x_j: np.ndarray, x_i_local: np.ndarray, rel: np.ndarray, rel_cov: np.ndarray, rng: np.random.Generator,
+) -> np.ndarray:
+    """Per-particle local → common transforms of a rendezvous, anchored on each particle's own poses.
+
+    For particle m, with j's pose ``x_j[m]`` in its central ancestor, i's local pose
+    ``x_i_local[m]`` in its local ancestor and the relative pose drawn from N(rel, rel_cov):
+    x_i = x_j[m] ⊕ (rel + ε_m)⁻¹ and T_m = x_i ⊕ x_i_local[m]⁻¹. Every joined particle then puts
+    robot i where the sighting places it relative to ITS OWN j (not the weighted mean of j), and
+    moves its local map rigidly with its own local pose, so what the local filter does not know
+    about its pose relative to its map becomes a spread of the moved landmarks around the robot
+    (where it belongs) instead of a spread of the robot around the sighting; the spread of the
+    T_m holds j's particle spread, the sightings' noise and the local particles' spread.
+
+    Args:
+        x_j, x_i_local: (M, 3) poses; rel: (3,); rel_cov: (3, 3).
+
+    Returns:
+        (M, 3) transforms (tx [m], ty [m], θ [rad]).
+    """
+    x_j, x_i_local = np.asarray(x_j, float), np.asarray(x_i_local, float)
+    chol = np.linalg.cholesky(0.5 * (rel_cov + rel_cov.T) + 1e-12 * np.eye(3))
+    r = np.asarray(rel, float) + rng.standard_normal((len(x_j), 3)) @ chol.T
+    return compose(compose(x_j, inverse(r)), inverse(x_i_local))
+
+
+def transform_spread(transforms: np.ndarray, log_w: np.ndarray | None = None) -> np.ndarray:
+    """Weighted covariance (3, 3) of transforms (M, 3) around their mean (θ by its circular mean,
+    deviations wrapped): the Cov T a particle-by-particle join actually realised."""
+    t = np.asarray(transforms, float)
+    w = np.full(len(t), 1.0 / len(t)) if log_w is None else np.exp(log_w - np.logaddexp.reduce(log_w))
+    mean = w @ t
+    mean[2] = np.arctan2(w @ np.sin(t[:, 2]), w @ np.cos(t[:, 2]))
+    d = t - mean
+    d[:, 2] = wrap_angle(d[:, 2])
+    return (w[:, None] * d).T @ d
 
 
 def transform_distance(a: Rendezvous, b: Rendezvous) -> float:
@@ -198,7 +238,9 @@ def join_rendezvous(
 
     Landmarks: descriptor matches between the two best maps whose positions agree within
     ``config.inlier_distance`` after the rendezvous transform are fused; other matches follow
-    ``config.source_outliers``.
+    ``config.source_outliers``. With ``config.rendezvous_anchor`` (and ``rv.seen`` a robot of
+    ``central``) each joined particle's transform is anchored on its own ancestors' poses
+    (:func:`anchored_transforms`); otherwise drawn from N(T, Cov T).
     """
     target = LandmarkMap.from_filter(central, z_variance=config.z_variance)
     source = LandmarkMap.from_filter(local, z_variance=config.z_variance)
@@ -212,9 +254,17 @@ def join_rendezvous(
             pairs = np.column_stack([target.ids[matches[ok, 0]], source.ids[matches[ok, 1]]])
             if config.source_outliers == "drop":
                 drop = source.ids[matches[~ok, 1]]
+    anchor = None
+    if config.rendezvous_anchor and rv.seen in central.index:
+        j, kl = central.index[rv.seen], local.index.get(robot, 0)
+        pj, pl = central.poses[:, j].copy(), local.poses[:, kl].copy()
+
+        def anchor(anc_c: np.ndarray, anc_l: np.ndarray) -> np.ndarray:
+            return anchored_transforms(pj[anc_c], pl[anc_l], rv.relative, rv.relative_cov, central.rng)
+
     return join_filters(
         central, local, rv.transform, pairs, config, robot, drop, 0.0, rv.transform_cov, per_pair=False,
-        pose_cov=rv.transform_cov,
+        pose_cov=rv.transform_cov, pair_transforms=anchor,
     )
 
 

@@ -8,7 +8,7 @@ import pytest
 
 from mrslam_core.datasets.synthetic import SyntheticWorld, SyntheticWorldConfig
 from mrslam_core.fusion.config import FusionConfig
-from mrslam_core.fusion.join import join_filters, move_landmarks, try_join
+from mrslam_core.fusion.join import draw_pairs, join_filters, move_landmarks, try_join
 from mrslam_core.fusion.kalman import kalman_fuse
 from mrslam_core.geometry.se2 import between, compose, wrap_angle
 from mrslam_core.slam.config import FilterConfig
@@ -307,3 +307,34 @@ def test_an_ill_conditioned_alignment_is_refused_with_its_reason():
     al, joined = try_join(central, local, replace(cfg, max_join_pose_sigma=0.05))
     assert joined is None and not al.accepted and "ill-conditioned" in al.reason
     assert central.robots == ["a"]
+
+
+def test_draw_pairs_samples_the_product_of_the_two_weightings():
+    """Equal central weights: every local particle is drawn (systematic resampling over the ravelled
+    M × L grid drew ONE local particle 400 times); unequal weights: each side's counts are its
+    systematic counts (within 1) and the pairing is independent."""
+    rng = np.random.default_rng(3)
+    c, loc = draw_pairs(np.zeros(400), np.zeros(400), 400, rng)
+    np.testing.assert_array_equal(np.sort(c), np.arange(400))
+    np.testing.assert_array_equal(np.sort(loc), np.arange(400))
+    wc, wl = np.array([0.5, 0.25, 0.25]), np.array([0.1, 0.9])
+    n = 4000
+    c, loc = draw_pairs(np.log(wc), np.log(wl), n, rng)
+    assert np.all(np.diff(c) >= 0)
+    np.testing.assert_allclose(np.bincount(c, minlength=3), n * wc, atol=1)
+    np.testing.assert_allclose(np.bincount(loc, minlength=2), n * wl, atol=1)
+    joint = np.bincount(c * 2 + loc, minlength=6).reshape(3, 2) / n
+    np.testing.assert_allclose(joint, np.outer(wc, wl), atol=0.02)
+
+
+def test_the_grid_draw_takes_one_local_particle_when_central_weights_are_equal():
+    """``pair_draw = grid`` (systematic over the ravelled M × L grid) against ``product``, same
+    filters: equal central weights, 50 equally weighted local particles at different poses."""
+    counts = {}
+    for how in ("grid", "product"):
+        c = MultiRobotFastSLAM(FilterConfig(num_particles=50, seed=1), ["a"], np.zeros((1, 3)))
+        loc = MultiRobotFastSLAM(FilterConfig(num_particles=50, seed=2), ["b"], np.zeros((1, 3)))
+        loc.poses[:, 0, 0] = np.arange(50.0)
+        res = join_filters(c, loc, T, np.zeros((0, 2)), FusionConfig(pair_draw=how))
+        counts[how] = np.unique(res.ancestors[:, 1]).size
+    assert counts == {"grid": 1, "product": 50}

@@ -10,12 +10,14 @@ from scipy.stats import chi2
 from mrslam_core.fusion.config import FusionConfig
 from mrslam_core.fusion.rendezvous import (
     RendezvousGate,
+    anchored_transforms,
     join_by_rendezvous,
     join_rendezvous,
     relative_pose,
     rendezvous_transform,
     sighting_transform,
     transform_distance,
+    transform_spread,
 )
 from mrslam_core.geometry.se2 import between, compose, inverse, wrap_angle
 from mrslam_core.slam.config import FilterConfig
@@ -157,3 +159,81 @@ def test_a_corrupted_first_sighting_is_outvoted_and_old_sightings_expire():
     # no window: one sighting is trusted as it is
     single = RendezvousGate.from_config(FusionConfig(rendezvous_window=None))
     assert single.offer("b", 1.0, "a", confirm) is confirm
+
+
+def test_anchored_transforms_put_every_particle_at_its_own_sighting_pose():
+    """Each particle's robot i lands at x_j[m] ⊕ rel⁻¹ whatever its local pose; with the sighting's
+    noise drawn per particle, the joined poses spread as J·rel_cov·Jᵀ around it."""
+    rng = np.random.default_rng(11)
+    rel = np.array([2.0, 0.5, 2.8])
+    x_j = np.array([1.0, -1.0, 0.4]) + rng.normal(0, [0.05, 0.05, 0.02], (6, 3))
+    x_loc = np.array([0.3, 0.2, -0.5]) + rng.normal(0, [0.1, 0.1, 0.2], (6, 3))
+    t = anchored_transforms(x_j, x_loc, rel, np.eye(3) * 1e-30, rng)
+    np.testing.assert_allclose(compose(t, x_loc), compose(x_j, inverse(rel)), atol=1e-5)  # 1e-12 jitter
+    # the transforms differ by the local poses' spread (0.2 rad in heading here)
+    assert np.std(t[:, 2]) > 0.05
+    # sighting noise: 40000 draws for one particle pair, covariance of x_i = x_j ⊕ rel⁻¹
+    rel_cov = np.array([[0.04, 0.01, 0.0], [0.01, 0.02, 0.003], [0.0, 0.003, 0.0032]])
+    n = 40000
+    t = anchored_transforms(np.broadcast_to(x_j[0], (n, 3)), np.broadcast_to(x_loc[0], (n, 3)), rel, rel_cov, rng)
+    xi = compose(t, x_loc[0])
+    jac = np.zeros((3, 3))
+    for c in range(3):
+        d = np.zeros(3)
+        d[c] = 1e-6
+        diff = compose(x_j[0], inverse(rel + d)) - compose(x_j[0], inverse(rel - d))
+        diff[2] = wrap_angle(diff[2])
+        jac[:, c] = diff / 2e-6
+    expect = jac @ rel_cov @ jac.T
+    np.testing.assert_allclose(transform_spread(xi), expect, rtol=0.05, atol=2e-4)
+
+
+def test_transform_spread_wraps_the_heading_and_uses_the_weights():
+    rng = np.random.default_rng(12)
+    cov = np.diag([0.01, 0.04, 0.0025])
+    t = rng.multivariate_normal([1.0, 2.0, np.pi - 0.01], cov, 50000)
+    t[:, 2] = wrap_angle(t[:, 2])  # half of them near -π
+    np.testing.assert_allclose(transform_spread(t), cov, rtol=0.03, atol=1e-4)
+    # weights: all mass on two transforms 0.2 rad apart across ±π
+    two = np.array([[0.0, 0.0, np.pi - 0.1], [2.0, 0.0, -np.pi + 0.1], [50.0, 50.0, 0.0]])
+    c = transform_spread(two, np.log(np.array([0.5, 0.5, 1e-300])))
+    np.testing.assert_allclose(c[[0, 2], [0, 2]], [1.0, 0.01], rtol=1e-9)
+
+
+def test_an_anchored_rendezvous_join_keeps_the_local_uncertainty_in_the_map_not_the_pose():
+    """Local particles that disagree about their heading by 0.2 rad (sd): joined without anchoring
+    the robot inherits that spread around the sighting; anchored, it is spread only by the
+    sightings (≈ √2·0.04 rad) while each particle keeps its landmark exactly where its own local
+    particle saw it relative to the robot."""
+    t_true = np.array([-2.0, 3.0, -0.7])
+    x_j, x_i = np.array([1.0, 1.0, 0.4]), np.array([3.0, 2.0, 2.9])
+    lm = np.array([0.0, 6.0, 0.0])
+    spreads = {}
+    for anchor in (False, True):
+        central = MultiRobotFastSLAM(FilterConfig(num_particles=400, seed=1), ["a"], x_j[None])
+        central.poses[:, 0] = x_j
+        local = MultiRobotFastSLAM(FilterConfig(num_particles=400, seed=2), ["b"], np.zeros((1, 3)))
+        local.poses[:, 0] = compose(inverse(t_true), x_i)
+        local.poses[:, 0, 2] += np.random.default_rng(3).normal(0, 0.2, 400)
+        lm_l = compose(inverse(t_true), lm)
+        lm_l[2] = 0.0
+        eye = np.eye(3, dtype=np.float32)
+        local.insert_landmarks(np.broadcast_to(lm_l, (400, 1, 3)).copy(),
+                               np.broadcast_to(np.eye(3) * 0.01, (400, 1, 3, 3)).copy(), np.ones((400, 1), bool), eye[2:3])
+        cfg = FusionConfig(rendezvous_anchor=anchor, transform_uncertainty="proposal", pair_draw="product")
+        rv, res = join_by_rendezvous(central, local, "b", "a", range_bearing(x_i, x_j), range_bearing(x_j, x_i), COV, COV, cfg)
+        p = central.poses[:, 1]
+        spreads[anchor] = np.std(wrap_angle(p[:, 2] - x_i[2]))
+        if anchor:
+            assert abs(np.mean(wrap_angle(p[:, 2] - x_i[2]))) < 0.01
+            mean = central.landmarks.gather(np.arange(400)[:, None], res.slot_map[:1][None], ("mean",))[0][:, 0]
+            anc_l = res.ancestors[:, 1]
+            # the landmark relative to the joined robot, per particle, as its local ancestor had it
+            rel_now = compose(inverse(p), np.column_stack([mean[:, :2], np.zeros(400)]))[:, :2]
+            rel_loc = compose(inverse(local.poses[anc_l, 0]), np.r_[lm_l[:2], 0.0])[:, :2]
+            np.testing.assert_allclose(rel_now, rel_loc, atol=1e-5)
+            # nothing of Cov T added on top of the anchored draw (it is the sampled transform)
+            np.testing.assert_allclose(central.pending_cov.get(1, np.zeros((3, 3))), 0.0)
+            assert np.isfinite(transform_spread(res.transforms)).all()
+    assert spreads[False] > 0.18
+    assert 0.04 < spreads[True] < 0.08
