@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import signal
 import sys
 import time
@@ -136,6 +137,13 @@ def launch_config(cfg: DemoConfig, facts: dict, out: Path):
     if unknown:
         raise ConfigError(f"node_prefix: no nodes {sorted(unknown)} (have {[n.label for n in nodes]})")
     nodes = [replace(n, prefix=list(cfg.node_prefix.get(n.label, ()))) for n in nodes]
+    killed = {f.node for f in cfg.faults if f.action == "kill"}
+    if killed and "FASTDDS_BUILTIN_TRANSPORTS" not in os.environ:
+        # A SIGKILLed Fast DDS participant leaves its shared-memory port behind; a process started
+        # in its place can match every topic and still receive nothing over shared memory
+        # (eProsima/Fast-DDS#2811, #5053; a CI run's restarted frontend published nothing for
+        # 29 s). Announcing UDP locators only makes the publishers use the loopback network.
+        nodes = [replace(n, env={**n.env, "FASTDDS_BUILTIN_TRANSPORTS": "UDPv4"}) for n in nodes]
     return LaunchConfig(use_sim_time=True, log_dir=str(out / "logs"), stop_timeout=10.0, nodes=nodes)
 
 

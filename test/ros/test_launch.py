@@ -163,3 +163,22 @@ def test_params_files_make_mixed_number_lists_floats(tmp_path):
     assert params == {"t_base_cam": [0.0, 0.5, 1.0], "names": ["a"], "n": 3, "use_sim_time": False}
     assert all(isinstance(v, float) for v in params["t_base_cam"])
     launcher.stop()
+
+
+def test_demo_nodes_avoid_shared_memory_only_when_a_node_is_killed(tmp_path, monkeypatch):
+    """A SIGKILLed Fast DDS participant's restarted process can match and still receive nothing
+    over shared memory, so a demo with kill faults runs its nodes on UDPv4 only."""
+    import numpy as np
+
+    from mrslam_ros.demo import DemoConfig, Fault, launch_config
+
+    monkeypatch.delenv("FASTDDS_BUILTIN_TRANSPORTS", raising=False)
+    facts = {"names": ["robot1", "robot2"], "starts": np.zeros((2, 3)), "t_base_cam": np.eye(4)}
+    plain = launch_config(DemoConfig(), facts, tmp_path)
+    assert all("FASTDDS_BUILTIN_TRANSPORTS" not in n.env for n in plain.nodes)
+    killed = launch_config(DemoConfig(faults=(Fault(at=5.0, node="robot1/frontend", duration=1.0),)), facts, tmp_path)
+    assert len(killed.nodes) == 5
+    assert all(n.env["FASTDDS_BUILTIN_TRANSPORTS"] == "UDPv4" for n in killed.nodes)
+    paused = launch_config(DemoConfig(faults=(Fault(at=5.0, node="robot1/frontend", action="pause", duration=1.0),)),
+                           facts, tmp_path)
+    assert all("FASTDDS_BUILTIN_TRANSPORTS" not in n.env for n in paused.nodes)
