@@ -137,8 +137,7 @@ def launch_config(cfg: DemoConfig, facts: dict, out: Path):
     if unknown:
         raise ConfigError(f"node_prefix: no nodes {sorted(unknown)} (have {[n.label for n in nodes]})")
     nodes = [replace(n, prefix=list(cfg.node_prefix.get(n.label, ()))) for n in nodes]
-    killed = {f.node for f in cfg.faults if f.action == "kill"}
-    if killed and "FASTDDS_BUILTIN_TRANSPORTS" not in os.environ:
+    if any(f.action == "kill" for f in cfg.faults) and "FASTDDS_BUILTIN_TRANSPORTS" not in os.environ:
         # A SIGKILLed Fast DDS participant leaves its shared-memory port behind; a process started
         # in its place can match every topic and still receive nothing over shared memory
         # (eProsima/Fast-DDS#2811, #5053; a CI run's restarted frontend published nothing for

@@ -178,7 +178,7 @@ def run_unknown_start(ds: MrclamDataset, cfg: MrclamFusionConfig, progress: bool
         # the joined robot's pose: weighted mean against Vicon now, and the particles' own spread
         w = np.exp(central.log_w - np.logaddexp.reduce(central.log_w))
         p = central.poses[:, central.index[name[i]]]
-        mean = w @ p[:, :2]
+        mean = central.estimate().mean[central.index[name[i]], :2]
         sd = float(np.sqrt(w @ ((p[:, :2] - mean) ** 2).sum(1)))
         truth = ds.groundtruth(i, times[k:k + 1])[0]
         merged[name[i]] = {
