@@ -33,6 +33,7 @@ from mrslam_ros.conversions import (
 )
 from mrslam_ros.diagnostics import Diagnostics
 from mrslam_ros.params import declare_config, read_config
+from mrslam_ros.qos import OBSERVATION_HISTORY
 from mrslam_ros.spin import run_node
 from mrslam_ros.sync import ApproximateTimeSync
 
@@ -71,7 +72,7 @@ class FrontendNode(Node):
         self.sync = ApproximateTimeSync(2, self.cfg.max_skew_ns, self.cfg.queue)
         self.frontend = None
         self._rig_key = None
-        self.pub = self.create_publisher(PointCloud2, "observations", 10)
+        self.pub = self.create_publisher(PointCloud2, "observations", OBSERVATION_HISTORY)
         self.scan_pub = self.create_publisher(LaserScan, "scan", 10)
         for i, side in enumerate(("left", "right")):
             self.create_subscription(CameraInfo, f"stereo/{side}/camera_info", lambda m, s=side: self.infos.__setitem__(s, m), 10)

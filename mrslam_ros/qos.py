@@ -8,6 +8,12 @@ Conventions (REP-2003 and the tf2 defaults):
 - sensor streams (images, camera_info, clouds): reliable, keep-last 10. Best-effort would lose
   stereo halves silently on a loaded machine; the frontend's queue bounds the backlog instead.
 - maps (``/map``): reliable, transient-local, keep-last 1, like map_server.
+- what the central node needs to catch up on after a restart: the simulator's odometry
+  (``ODOMETRY_HISTORY``, 10 s at 10 Hz) and the frontends' observation sets
+  (``OBSERVATION_HISTORY``, 10 s at 5 Hz) are published transient-local; the central node
+  subscribes transient-local only where every publisher offers it (:func:`adapted_to_publishers`),
+  so a restarted node receives what was published while it was down and a robot driver's volatile
+  odometry still matches.
 - everything else: reliable, volatile, keep-last 10.
 """
 
@@ -27,6 +33,8 @@ CLOCK = _profile(10)
 TF = _profile(100)
 TF_STATIC = _profile(100, DurabilityPolicy.TRANSIENT_LOCAL)
 MAP = _profile(1, DurabilityPolicy.TRANSIENT_LOCAL)
+ODOMETRY_HISTORY = _profile(100, DurabilityPolicy.TRANSIENT_LOCAL)
+OBSERVATION_HISTORY = _profile(50, DurabilityPolicy.TRANSIENT_LOCAL)
 
 _BY_NAME = {"/tf": TF, "/tf_static": TF_STATIC, "/clock": CLOCK, "/map": MAP}
 
@@ -46,26 +54,27 @@ def is_latched(topic: str) -> bool:
     return qos_for_topic(topic).durability == DurabilityPolicy.TRANSIENT_LOCAL
 
 
-def adapted_to_publishers(infos, topic: str = "") -> QoSProfile:
+def adapted_to_publishers(infos, topic: str = "", depth: int = 100) -> QoSProfile:
     """A subscription profile compatible with every publisher of a topic (what a recorder needs).
 
     Args:
         infos: the ``TopicEndpointInfo`` list of ``Node.get_publishers_info_by_topic``.
         topic: the topic's name, for the default when there is no publisher yet.
+        depth: keep-last depth of the subscription.
 
     Returns:
         Transient-local when every publisher is transient-local (so latched messages published
         before the subscription still arrive), else volatile; best-effort when any publisher is
-        best-effort (a reliable subscription would not match it), else reliable; keep-last 100.
+        best-effort (a reliable subscription would not match it), else reliable; keep-last ``depth``.
     """
     if not infos:
         base = qos_for_topic(topic)
-        return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100, reliability=base.reliability,
+        return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth, reliability=base.reliability,
                           durability=base.durability)
     profiles = [i.qos_profile for i in infos]
     latched = all(p.durability == DurabilityPolicy.TRANSIENT_LOCAL for p in profiles)
     best_effort = any(p.reliability == ReliabilityPolicy.BEST_EFFORT for p in profiles)
-    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth,
                       reliability=ReliabilityPolicy.BEST_EFFORT if best_effort else ReliabilityPolicy.RELIABLE,
                       durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE)
 

@@ -173,6 +173,9 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
     ap.add_argument("--out", help="run folder (with --offline; default <bag>_offline)")
     ap.add_argument("--config", help="central node parameters (with --offline; default slam.yaml beside the bag)")
     ap.add_argument("--quiet", action="store_true", help="no progress bar (with --offline)")
+    ap.add_argument("--seed", type=int, help="the filter's seed instead of the config's (with --offline)")
+    ap.add_argument("--downtime", metavar="A:B", help="with --offline: the central node killed after its "
+                    "checkpoint at A s and back with --resume at B s (stamp time)")
     return ap.parse_args(argv)
 
 

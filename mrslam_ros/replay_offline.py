@@ -7,11 +7,17 @@ parameters (``--config``, default ``slam.yaml`` beside the bag, as ``mrslam demo
 the filter makes the same updates in the same order as the live node did; the report compares
 the estimates with ``/<robot>/ground_truth`` and the odometry, and (``--compare``, on by default
 when the bag holds ``/<robot>/pose``) with the live node's estimates.
+
+``--seed`` replaces the filter's seed (one recording, many draws of the filter). ``--downtime A:B``
+replays a central node killed after its checkpoint at A s and back with ``--resume`` at B s: the
+mapper is saved once it has every message stamped up to A, resumed from that checkpoint, and sees
+nothing stamped before B (what a live node misses while it is down).
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 import time
 from pathlib import Path
@@ -25,10 +31,25 @@ from mrslam_core.pipelines.central import CentralMapper
 from mrslam_ros.bag import BagError, bag_info, read_bag
 
 
-def feed(bag: Path, mapper: CentralMapper, progress: bool = True) -> dict[str, int]:
-    """Feed the bag's odometry and observation sets into ``mapper``; returns messages used per kind."""
+def feed(bag: Path, mapper: CentralMapper, progress: bool = True,
+         downtime: tuple[float, float] | None = None) -> tuple[dict[str, int], CentralMapper]:
+    """Feed the bag's odometry and observation sets into ``mapper``.
+
+    Args:
+        downtime: (checkpoint, back) [s of stamp time]: the mapper is saved once every message
+            stamped up to ``checkpoint`` is in, resumed from the save, and given nothing stamped
+            before ``back`` (a central node killed and restarted with ``--resume``).
+
+    Returns:
+        messages used per kind, and the mapper at the end (a new one after a downtime).
+    """
+    import tempfile
+
     from mrslam_ros.conversions import ConversionError, cloud_to_observations, odometry_to_pose
     from mrslam_ros.runlog import deserialize
+
+    down = None if downtime is None else (int(downtime[0] * 1e9), int(downtime[1] * 1e9))
+    skip_until = 0
 
     topics = {}
     for r in mapper.robots:
@@ -44,13 +65,24 @@ def feed(bag: Path, mapper: CentralMapper, progress: bool = True) -> dict[str, i
         try:
             if kind == "odom":
                 stamp, pose, _ = odometry_to_pose(msg)
-                mapper.add_odometry(robot, stamp, pose)
             else:
-                mapper.add_observations(cloud_to_observations(msg, robot))
-                mapper.process()
+                obs = cloud_to_observations(msg, robot)
+                stamp = obs.stamp_ns
         except ConversionError:
             used["bad"] += 1
             continue
+        if down is not None and stamp > down[0]:
+            mapper.process(flush=True)
+            with tempfile.TemporaryDirectory() as tmp:
+                mapper = CentralMapper.resume(mapper.cfg, mapper.save(Path(tmp) / "checkpoint.npz"))
+            skip_until, down = down[1], None
+        if stamp < skip_until:
+            continue
+        if kind == "odom":
+            mapper.add_odometry(robot, stamp, pose)
+        else:
+            mapper.add_observations(obs)
+            mapper.process()
         used[kind] += 1
         if progress and (i % 200 == 0 or i + 1 == total):
             done = (i + 1) / max(total, 1)
@@ -60,7 +92,7 @@ def feed(bag: Path, mapper: CentralMapper, progress: bool = True) -> dict[str, i
     mapper.process(flush=True)
     if progress:
         print(file=sys.stderr)
-    return used
+    return used, mapper
 
 
 def compare(est: dict[str, tuple[np.ndarray, np.ndarray]], live: dict[str, tuple[np.ndarray, np.ndarray]]) -> dict:
@@ -86,6 +118,9 @@ def main(argv: list[str]) -> int:
     ap.add_argument("--config", help="central node parameters (SlamNodeConfig YAML); default: slam.yaml beside the bag")
     ap.add_argument("--out", help="run folder (default: <bag>_offline)")
     ap.add_argument("--quiet", action="store_true", help="no progress bar")
+    ap.add_argument("--seed", type=int, help="the filter's seed instead of the config's")
+    ap.add_argument("--downtime", metavar="A:B", help="replay a central node killed after its checkpoint at A s "
+                    "and back with --resume at B s (stamp time)")
     args, _ = ap.parse_known_args(argv)
     from mrslam_ros.runlog import evaluation_trajectories, read_series
     from mrslam_ros.slam_node import SlamNodeConfig
@@ -98,10 +133,21 @@ def main(argv: list[str]) -> int:
     except (ConfigError, OSError) as exc:
         print(f"mrslam replay --offline: {config}: {exc}", file=sys.stderr)
         return 2
+    if args.seed is not None:
+        cfg = dataclasses.replace(cfg, filter=dataclasses.replace(cfg.filter, seed=args.seed))
+    downtime = None
+    if args.downtime:
+        try:
+            downtime = tuple(float(v) for v in args.downtime.split(":"))
+            if len(downtime) != 2 or not downtime[0] < downtime[1]:
+                raise ValueError
+        except ValueError:
+            print(f"mrslam replay --offline: --downtime {args.downtime!r}: expected A:B with A < B [s]", file=sys.stderr)
+            return 2
     mapper = CentralMapper(cfg)
     wall = time.monotonic()
     try:
-        used = feed(bag, mapper, progress=not args.quiet)
+        used, mapper = feed(bag, mapper, progress=not args.quiet, downtime=downtime)
         series = read_series(bag, mapper.robots)
     except BagError as exc:
         print(f"mrslam replay --offline: {exc}", file=sys.stderr)

@@ -23,6 +23,7 @@ from mrslam_core.sim.config import SimConfig
 from mrslam_core.sim.simulation import Simulation
 from mrslam_ros.conversions import array_to_image, calibration_to_camera_info, ns_to_stamp, pose_to_msg, transform_msg
 from mrslam_ros.params import declare_config, read_config
+from mrslam_ros.qos import ODOMETRY_HISTORY
 from mrslam_ros.spin import run_node
 
 
@@ -70,7 +71,7 @@ class SimNode(Node):
                 "right": self.create_publisher(Image, f"/{n}/stereo/right/image_raw", 5),
                 "left_info": self.create_publisher(CameraInfo, f"/{n}/stereo/left/camera_info", 5),
                 "right_info": self.create_publisher(CameraInfo, f"/{n}/stereo/right/camera_info", 5),
-                "odom": self.create_publisher(Odometry, f"/{n}/odom", 50),
+                "odom": self.create_publisher(Odometry, f"/{n}/odom", ODOMETRY_HISTORY),
                 "truth": self.create_publisher(Odometry, f"/{n}/ground_truth", 50),
             }
             self.create_subscription(Twist, f"/{n}/cmd_vel", lambda m, n=n: self.on_cmd(n, m), 10)

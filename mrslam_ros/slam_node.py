@@ -125,12 +125,19 @@ class SlamNode(Node):
         self.cloud_pub = self.create_publisher(PointCloud2, "/slam/landmarks", 1)
         self.marker_pub = self.create_publisher(MarkerArray, "/slam/landmark_markers", 1)
         self.particle_pub = self.create_publisher(PoseArray, "/slam/particles", 1)
+        topics = [f"/{r}/{kind}" for kind in ("odom", "observations") for r in robots]
+        if any(self.mapper.trajectory.values()):
+            self._wait_for_publishers(topics, 3.0)  # resumed: learn who keeps a history first
         #: input subscriptions, odometry first: :meth:`drain` empties them in this order
-        self.inputs = [self.create_subscription(Odometry, f"/{r}/odom", lambda m, r=r: self.on_odom(r, m), 100,
-                                                callback_group=inputs) for r in robots]
+        # transient-local where every publisher keeps a history: a restarted node receives what
+        # was published while it was down (qos.py); volatile otherwise, so any publisher matches
+        self.inputs = [self.create_subscription(Odometry, f"/{r}/odom", lambda m, r=r: self.on_odom(r, m),
+                                                self._input_qos(f"/{r}/odom", 100), callback_group=inputs)
+                       for r in robots]
         self.inputs += [self.create_subscription(PointCloud2, f"/{r}/observations",
                                                  lambda m, r=r: self.on_observations(r, m),
-                                                 self.cfg.input_depth, callback_group=inputs) for r in robots]
+                                                 self._input_qos(f"/{r}/observations", self.cfg.input_depth),
+                                                 callback_group=inputs) for r in robots]
         self.unknown: set[str] = set()
         self.latency_ms: deque[float] = deque(maxlen=100_000)
         self._merges_logged = self._relocs_logged = 0
@@ -224,6 +231,17 @@ class SlamNode(Node):
                     break
                 sub.callback(got[0])
 
+    def _wait_for_publishers(self, topics: list[str], timeout: float) -> None:
+        """Until every topic has a publisher in the graph (discovery), at most ``timeout`` wall s."""
+        until = time.monotonic() + timeout
+        while time.monotonic() < until and not all(self.get_publishers_info_by_topic(t) for t in topics):
+            time.sleep(0.05)
+
+    def _input_qos(self, topic: str, depth: int):
+        from mrslam_ros.qos import adapted_to_publishers
+
+        return adapted_to_publishers(self.get_publishers_info_by_topic(topic), topic, depth)
+
     def _log_merges(self) -> None:
         for m in self.mapper.merges[self._merges_logged:]:
             if m["accepted"]:
@@ -301,6 +319,7 @@ class SlamNode(Node):
             "dropped": drops,
             "queued_at_end": self.mapper.queued,
             "merges": self.mapper.merges,
+            "relocalizations": self.mapper.relocalizations,
             "unmerged": sorted(self.mapper.local),
         }
         (out / "slam.json").write_text(json.dumps(stats, indent=1))

@@ -115,6 +115,17 @@ def test_bad_input_is_counted_and_leaves_the_filter_alone():
     assert m.slam.steps == 2
 
 
+def test_a_set_inside_a_hole_in_the_odometry_is_dropped_not_interpolated():
+    m = CentralMapper(_cfg(robots=("robot1",), start_poses=(0.0, 0.0, 0.0)))
+    _odom(m, "robot1", 2.0)
+    _odom(m, "robot1", 6.0, start=4.5)  # 2.5 s without odometry (the central node was down)
+    for t in (1.0, 3.0, 4.4, 5.0):
+        m.add_observations(_obs("robot1", t))
+    done = m.process(flush=True)
+    assert _order(done) == [("robot1", 1.0), ("robot1", 5.0)]
+    assert m.drops == {"odometry_gap": 2}
+
+
 def test_queue_overflow_drops_the_oldest():
     m = CentralMapper(_cfg(max_queue=3))
     _odom(m, "robot1", 2)

@@ -79,3 +79,20 @@ def test_live_replay_with_a_looping_bag_matches_offline(offline, tmp_path):
         assert len(common) >= 0.95 * len(t_off), (r, len(common), len(t_off), stats["dropped"])
         d = np.linalg.norm(p_live[i_live, :2] - tum[i_off, 1:3], axis=1)
         assert d.max() <= 0.05, (r, d.max(), stats["dropped"])
+
+
+def test_offline_replay_with_a_downtime_resumes_from_the_checkpoint(offline, tmp_path):
+    from mrslam_ros import replay_offline
+
+    out = tmp_path / "down"
+    assert replay_offline.main([str(RECORDING / "bag"), "--offline", "--quiet", "--seed", "3",
+                                "--downtime", "8.0:10.0", "--out", str(out)]) == 0
+    report = json.loads((out / "report.json").read_text())
+    _, full = offline
+    for name in ("robot1", "robot2"):
+        t = np.loadtxt(out / "trajectories" / f"{name}_est.tum")[:, 0]
+        assert not ((t > 8.0) & (t < 10.0)).any(), name  # nothing stamped inside the downtime
+        assert (t <= 8.0).sum() >= 35 and (t >= 10.0).sum() >= 45, name  # before and after it
+        # ten 5 Hz frames fewer than the run without it
+        assert full["robots"][name]["poses"] - report["robots"][name]["poses"] == pytest.approx(10, abs=1)
+    assert replay_offline.main([str(RECORDING / "bag"), "--offline", "--downtime", "10:8"]) == 2
