@@ -249,7 +249,8 @@ def write_report(cfg: DemoConfig, out: Path, facts: dict, extra: dict | None = N
             landmarks = {"mean": z["mean"], "cov": z["cov"]}
     info = {"explored_fraction": explored, "dropped": slam_stats.get("dropped", {}),
             "latency_ms": slam_stats.get("latency_ms"),
-            "diagnostics": diagnostics(bag), "updates": slam_stats.get("updates", {})}
+            "diagnostics": diagnostics(bag), "updates": slam_stats.get("updates", {}),
+            "outlier_matches": slam_stats.get("outlier_matches")}
     info.update(extra or {})
     return write_run(out, trajectories, cfg, np.asarray(slam_stats.get("update_ms_all", []), float), landmarks,
                      extra=info)

@@ -160,7 +160,8 @@ def main(argv: list[str]) -> int:
     slots, mean, cov, _, _ = mapper.slam.best_map()
     report = write_run(out, trajectories, cfg, np.asarray(mapper.update_ms), {"mean": mean, "cov": cov},
                        extra={"dropped": mapper.counters(), "messages": used, "wall_s": wall,
-                              "live_difference": compare(est, live)})
+                              "live_difference": compare(est, live),
+                              "outlier_matches": mapper.slam.outlier_pairs / mapper.slam.num_particles})
     for name, r in report["robots"].items():
         if "ate_rmse_m" in r:
             diff = report["live_difference"].get(name)

@@ -320,6 +320,7 @@ class SlamNode(Node):
             "queued_at_end": self.mapper.queued,
             "merges": self.mapper.merges,
             "relocalizations": self.mapper.relocalizations,
+            "outlier_matches": self.mapper.slam.outlier_pairs / self.mapper.slam.num_particles,
             "unmerged": sorted(self.mapper.local),
         }
         (out / "slam.json").write_text(json.dumps(stats, indent=1))

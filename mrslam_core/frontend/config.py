@@ -49,6 +49,13 @@ class FrontendConfig:
             frame's common motion [px].
         track_search_px: radius in which the frame's common image motion (a turning robot) is
             looked for [px]; at most ``track_radius_px`` turns that search off.
+        track_consistency_gate: a continued track must agree with the frame's rigid motion:
+            the 3D motion between consecutive frames is fitted to the tracked points by RANSAC
+            (Kabsch on 3-point samples), and a track whose point in this frame, moved back,
+            lies further than this chi-square quantile (3 dof, with both points' covariances)
+            from its point in the previous frame ends there (a wrong stereo match in one frame,
+            or a look-alike continuing the track). 0 turns the check off.
+        track_ransac_hypotheses: 3-point samples drawn for that fit.
         min_depth: points nearer than this along the optical axis are dropped [m].
         max_depth: points farther than this are dropped [m].
         obstacle_min_height: lower edge of the obstacle band in base_link z [m].
@@ -89,6 +96,8 @@ class FrontendConfig:
     track_ratio: float = 0.9
     track_radius_px: float = 60.0
     track_search_px: float = 160.0
+    track_consistency_gate: float = 0.0
+    track_ransac_hypotheses: int = 64
     min_depth: float = 0.2
     max_depth: float = 20.0
     obstacle_min_height: float = 0.05
@@ -105,7 +114,7 @@ class FrontendConfig:
             "max_features", "harris_block_size", "usurf_scale", "patch_radius", "sigma_d",
             "sigma_r", "sigma_c", "min_track_length", "max_observations", "grid_cols",
             "grid_rows", "track_radius_px", "max_depth", "scan_bins", "scan_max_range",
-            "dense_downsample",
+            "dense_downsample", "track_ransac_hypotheses",
         )
         for name in positive:
             if getattr(self, name) <= 0:
@@ -120,6 +129,8 @@ class FrontendConfig:
             raise ValueError("track_ratio must be in (0, 1]")
         if not 0.0 <= self.track_descriptor_gate <= 4.0:
             raise ValueError("track_descriptor_gate must be in [0, 4] (unit descriptors)")
+        if self.track_consistency_gate < 0:
+            raise ValueError("track_consistency_gate must be >= 0 (0: off)")
         if not 0.0 <= self.min_depth < self.max_depth:
             raise ValueError("need 0 <= min_depth < max_depth")
         if self.obstacle_min_height >= self.obstacle_max_height:

@@ -210,5 +210,5 @@ class Frontend:
         args = (xy[:, 1], xy[:, 0], d, rig.f, rig.cx, rig.cy, rig.baseline)
         points = triangulate(*args)
         cov = triangulation_covariance(*args, cfg.sigma_d, cfg.sigma_r, cfg.sigma_c)
-        ids, length = self.tracker.update(xy, desc)
+        ids, length = self.tracker.update(xy, desc, points, cov)
         return StereoFrame(xy, d, strength, points, cov, desc, ids, length)

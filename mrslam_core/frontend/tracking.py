@@ -8,6 +8,11 @@ among the previous points within ``track_radius_px`` in the image, with squared 
 A turning robot moves the whole image (about f·ω/rate pixels per frame: 55 px at 1.2 rad/s and
 5 Hz with the simulator's head), so the gate is centred on the frame's common image motion,
 the median displacement of the distinctive mutual matches within ``track_search_px``.
+
+Descriptors alone let a look-alike continue a track, and a wrong stereo match gives a track one
+wrong 3D point; with ``track_consistency_gate`` set, the continued tracks must also agree with
+one rigid motion of the camera between the two frames (RANSAC on their 3D points, as stereo
+visual odometry checks its matches), and those that do not end there.
 """
 
 from __future__ import annotations
@@ -16,6 +21,12 @@ import numpy as np
 
 from mrslam_core.frontend.config import FrontendConfig
 from mrslam_core.frontend.features import descriptor_distance
+from mrslam_core.geometry.rigid3d import fit_rigid_3d
+from mrslam_core.linalg import quad_form, sym_inv_det
+
+#: Fewer continued tracks than this cannot be checked against a rigid motion (a 3-point fit
+#: with one point to test it); they are kept as the descriptors matched them.
+MIN_CHECKED_TRACKS = 4
 
 
 class Tracker:
@@ -29,6 +40,8 @@ class Tracker:
         self.cfg = cfg
         self.next_id = 0
         self.shift = np.zeros(2)  # common image motion of the last update [px]
+        self.inconsistent = 0  # continued tracks ended by the rigid-motion check, in all
+        self.rng = np.random.default_rng(0)  # RANSAC samples; fixed, so runs repeat
         self.reset()
 
     def reset(self) -> None:
@@ -37,6 +50,8 @@ class Tracker:
         self._desc = np.zeros((0, 0), np.float32)
         self._ids = np.zeros(0, np.int64)
         self._length = np.zeros(0, np.int64)
+        self._points = np.zeros((0, 3))
+        self._cov = np.zeros((0, 3, 3))
 
     def _common_motion(self, dist: np.ndarray, disp: np.ndarray, min_matches: int = 8) -> np.ndarray:
         """(2,) median image motion of the distinctive mutual matches within ``track_search_px``
@@ -55,12 +70,17 @@ class Tracker:
             return np.zeros(2)
         return np.median(disp[np.flatnonzero(ok), best[ok]], axis=0)
 
-    def update(self, xy: np.ndarray, desc: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def update(
+        self, xy: np.ndarray, desc: np.ndarray, points: np.ndarray | None = None,
+        cov: np.ndarray | None = None,
+    ) -> tuple[np.ndarray, np.ndarray]:
         """Associate this frame's points with the previous frame's.
 
         Args:
             xy: (N, 2) rectified left-image positions (column, row) [px].
             desc: (N, D) unit descriptors.
+            points, cov: (N, 3) their 3D points and (N, 3, 3) covariances in the camera frame
+                [m, m²], for the rigid-motion check (``track_consistency_gate``); None: no check.
 
         Returns:
             (track_ids (N,) int64, length (N,) int64: consecutive frames seen, this one included).
@@ -89,6 +109,11 @@ class Tracker:
                 & (d_best < self.cfg.track_ratio**2 * second)
                 & mutual
             )
+            if points is not None and self.cfg.track_consistency_gate > 0 and self._points.shape[0] == t:
+                cur = np.flatnonzero(matched)
+                ok = self._consistent(points[cur], cov[cur], self._points[best[cur]], self._cov[best[cur]])
+                matched[cur[~ok]] = False
+                self.inconsistent += int((~ok).sum())
             ids[matched] = self._ids[best[matched]]
             length[matched] = self._length[best[matched]] + 1
         fresh = ~matched
@@ -98,7 +123,39 @@ class Tracker:
         self._desc = np.asarray(desc, np.float32).copy()
         self._ids = ids.copy()
         self._length = length.copy()
+        if points is not None:
+            self._points = np.asarray(points, float).copy()
+            self._cov = np.asarray(cov, float).copy()
+        else:
+            self._points, self._cov = np.zeros((0, 3)), np.zeros((0, 3, 3))
         return ids, length
+
+    def _consistent(self, cur: np.ndarray, cur_cov: np.ndarray, prev: np.ndarray, prev_cov: np.ndarray) -> np.ndarray:
+        """(P,) bool: which of P continued tracks agree with the camera's rigid motion.
+
+        RANSAC over ``track_ransac_hypotheses`` 3-point samples of prev ≈ R·cur + t; a pair is an
+        inlier when ν = prev − (R·cur + t) has νᵀ(Σ_prev + R Σ_cur Rᵀ)⁻¹ν ≤ the gate. The motion of
+        the largest consensus is refitted on its inliers and the pairs classified again.
+        """
+        p = cur.shape[0]
+        if p < MIN_CHECKED_TRACKS:
+            return np.ones(p, bool)
+        gate = self.cfg.track_consistency_gate
+        samples = np.argsort(self.rng.random((self.cfg.track_ransac_hypotheses, p)), axis=1)[:, :3]
+        rot, trans = fit_rigid_3d(cur[samples], prev[samples])  # (H, 3, 3), (H, 3)
+
+        def inliers(rot, trans):
+            nu = prev - (np.einsum("...ij,pj->...pi", rot, cur) + trans[..., None, :])
+            s = prev_cov + np.einsum("...ij,pjk,...lk->...pil", rot, cur_cov, rot)
+            inv, _ = sym_inv_det(s)
+            return quad_form(nu, inv) <= gate
+
+        votes = inliers(rot, trans)  # (H, P)
+        best = votes[np.argmax(votes.sum(axis=1))]
+        if best.sum() < 3:
+            return best
+        rot, trans = fit_rigid_3d(cur[best], prev[best])
+        return inliers(rot, trans)
 
 
 def select_spread(

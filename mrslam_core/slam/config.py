@@ -61,6 +61,14 @@ class AssociationConfig:
     yet a landmark, until it has been associated this many times in a particle; candidates
     neither shape the pose proposal nor weight the particle (their factor is p0), and the
     Hungarian mode matches observations to them only after the landmarks (001 III-D).
+    ``outlier_gate`` (FastSLAM 2.0 proposal only; 0 = off): after the pose proposal of a
+    particle is fitted to its associated pairs, a pair whose residual at the proposal's mode,
+    νᵀZ⁻¹ν with Z = GΣGᵀ + R, exceeds this chi-square quantile is an outlier (a look-alike
+    matched to the wrong landmark); the proposal is fitted again without the outliers, and the
+    pairs are classified again at the new mode, ``outlier_rounds`` times in all (the outlier
+    rejection of ORB-SLAM's pose optimisation). An outlier neither moves the pose, nor updates
+    the landmark, nor starts a new one; its weight factor is p0, as for an unexplained
+    observation.
     """
 
     mode: Literal["ml", "hungarian"] = "ml"
@@ -73,12 +81,16 @@ class AssociationConfig:
     descriptor_trust_gate: float = 0.0
     min_observations: int = 1
     geometry_weight: float = 1.0
+    outlier_gate: float = 0.0
+    outlier_rounds: int = 3
 
     def __post_init__(self) -> None:
         if self.mahalanobis_gate <= 0 or self.descriptor_gate < 0:
             raise ValueError("mahalanobis_gate must be > 0 and descriptor_gate >= 0")
         if self.max_candidates < 1:
             raise ValueError("max_candidates must be >= 1")
+        if self.outlier_gate < 0 or self.outlier_rounds < 1:
+            raise ValueError("outlier_gate must be >= 0 and outlier_rounds >= 1")
 
 
 @dataclass(frozen=True)

@@ -45,6 +45,11 @@ MAX_ABS_INPUT = 1e4
 VARIANCE_BOUNDS = (1e-12, 1e8)
 
 
+def _sum_by(index: np.ndarray, values: np.ndarray, n: int) -> np.ndarray:
+    """Row sums of ``values`` (P, C) grouped by ``index`` (P,) into (n, C) (``np.add.at``, faster)."""
+    return np.stack([np.bincount(index, values[:, c], n) for c in range(values.shape[1])], axis=1)
+
+
 class FilterInputError(ValueError):
     """An update the filter cannot use at all (unknown robot, malformed arrays)."""
 
@@ -137,6 +142,8 @@ class MultiRobotFastSLAM:
         self.resamples = 0
         self.removed_landmarks = 0
         self.relocalizations = 0
+        #: (particle, observation) pairs the proposal left out as outliers (association.outlier_gate)
+        self.outlier_pairs = 0
         #: per robot index: drift covariance D (3, 3) of its pose since its landmark
         #: observations last constrained it (see RelocalizationConfig); missing = initial σ².
         self.drift_cov: dict[int, np.ndarray] = {}
@@ -387,6 +394,7 @@ class MultiRobotFastSLAM:
                     pair = np.where(pair >= 0, pair, second)
 
         assoc = pair >= 0
+        rejected = np.zeros_like(assoc)
         mi, bi = np.nonzero(assoc)
         if mi.size:
             pv = pair[mi, bi]
@@ -396,11 +404,19 @@ class MultiRobotFastSLAM:
             mu_s = np.take(mu.reshape(-1, dim), pick, axis=0)  # much faster than mu[mi, pv]
             sig_s = np.take(sig.reshape(-1, dim * dim), pick, axis=0).reshape(-1, dim, dim)
             if motion_cov is not None:
-                poses, usable = self._sample_proposal(
+                poses, usable, inlier = self._sample_proposal(
                     k, mi[conf], z[bi[conf]], r[bi[conf]], mu_s[conf], sig_s[conf], motion_cov, log_l
                 )
                 if not usable:  # a lost robot's observations that cannot re-localise it
                     return 0, 0
+                if not inlier.all():
+                    out = np.flatnonzero(conf)[~inlier]
+                    assoc[mi[out], bi[out]] = False
+                    rejected[mi[out], bi[out]] = True
+                    self.outlier_pairs += out.size
+                    keep = np.ones(mi.size, bool)
+                    keep[out] = False
+                    mi, bi, slots, conf, mu_s, sig_s = (a[keep] for a in (mi, bi, slots, conf, mu_s, sig_s))
             new_mu, new_cov, d_sel, norm_sel = model.update(poses[mi], z[bi], r[bi], mu_s, sig_s)
             count, score = store.gather(mi, slots, ("count", "score"))
             store.write(
@@ -413,13 +429,12 @@ class MultiRobotFastSLAM:
                 log_l += np.bincount(mi[~conf], log_p0[bi[~conf]], m)
             store.set_reference(slots, new_mu)
         elif motion_cov is not None:
-            poses, _ = self._sample_proposal(k, mi, z[:0], r[:0], z[:0], r[:0], motion_cov, log_l)
+            poses, _, _ = self._sample_proposal(k, mi, z[:0], r[:0], z[:0], r[:0], motion_cov, log_l)
         if self.config.existence.enabled:
             self._update_existence(poses, mean_pose, radius, mi, vslots[pair[mi, bi]] if mi.size else mi)
 
-        unassoc = ~assoc
-        log_l += (unassoc * log_p0[None]).sum(axis=1)
-        created = self._create(poses, z, r, desc, tracks, unassoc)
+        log_l += (~assoc * log_p0[None]).sum(axis=1)
+        created = self._create(poses, z, r, desc, tracks, ~assoc & ~rejected)
         return int(assoc.sum()), created
 
     def _sample_proposal(
@@ -438,15 +453,20 @@ class MultiRobotFastSLAM:
         A robot whose observations are improbable in every particle is re-localised or its
         observations set aside (see :class:`RelocalizationConfig`).
 
+        With ``association.outlier_gate`` set, pairs whose residual at the mode fails the gate
+        are left out and the proposal fitted again (see :class:`AssociationConfig`).
+
         Returns:
             (the new poses of robot k (M, 3), also written into ``self.poses``; False when the
-            observations were set aside because the robot is lost and they cannot fix its pose).
+            observations were set aside because the robot is lost and they cannot fix its pose;
+            (P,) bool, the pairs the proposal kept).
         """
         m = self.num_particles
         x_hat = self.poses[:, k].copy()
         reloc = self.config.relocalization
-        mode, cov, ll, nis, info = self._fold(x_hat, mi, z, r, mu, sig, motion_cov, 1)
+        (mode, cov, ll, nis, info), terms, lam0, p_det = self._fold(x_hat, mi, z, r, mu, sig, motion_cov, 1)
         usable = True
+        inlier = np.ones(mi.size, bool)
         if mi.size:
             counts = np.bincount(mi, minlength=m)
             w = np.exp(self.log_w)
@@ -459,7 +479,7 @@ class MultiRobotFastSLAM:
                 prior = np.broadcast_to(self._drift(k), motion_cov.shape).copy()
                 if not self.config.defer_motion_noise:  # else D already holds the unsampled noise
                     prior += motion_cov
-                mode, cov, ll, nis, info = self._fold(x_hat, mi, z, r, mu, sig, prior, reloc.iterations)
+                (mode, cov, ll, nis, info), _, _, _ = self._fold(x_hat, mi, z, r, mu, sig, prior, reloc.iterations)
                 self.relocalizations += 1
                 self._inform_drift(k, np.einsum("m,mij->ij", w, prior), np.einsum("m,mij->ij", w, info))
             elif lost:
@@ -470,6 +490,12 @@ class MultiRobotFastSLAM:
                     return x_hat, usable
                 mode, cov = x_hat, motion_cov
             else:
+                gate = self.config.association.outlier_gate
+                if gate > 0:
+                    inlier, (mode, cov, ll, nis, info) = self._robust_fold(
+                        x_hat, mi, terms, lam0, p_det, mode, gate
+                    )
+                    counts = np.bincount(mi[inlier], minlength=m)
                 log_l += np.where(counts > 0, ll, 0.0)
                 if reloc.enabled:
                     self._inform_drift(k, self._drift(k), np.einsum("m,mij->ij", w, info))
@@ -479,52 +505,99 @@ class MultiRobotFastSLAM:
         new = mode + (chol @ self.rng.standard_normal((m, 3, 1)))[..., 0]
         new[:, 2] = wrap_angle(new[:, 2])
         self.poses[:, k] = new
-        return new, usable
+        return new, usable, inlier
+
+    def _robust_fold(
+        self, x_hat: np.ndarray, mi: np.ndarray, terms: tuple, lam0: np.ndarray, p_det: np.ndarray,
+        mode: np.ndarray, gate: float,
+    ) -> tuple[np.ndarray, tuple]:
+        """Classify the pairs at ``mode`` by their residual νᵀZ⁻¹ν against ``gate``, refit the
+        proposal on the inliers, and repeat (``association.outlier_rounds`` in all).
+
+        The residual at the mode is the linearised one the proposal itself uses,
+        ν − Hₓ(mode − x̂), so the rounds re-sum the per-pair ``terms`` of :meth:`_fold` and never
+        evaluate the observation model again.
+
+        Returns:
+            ((P,) inlier mask, the :meth:`_combine` result on the final inliers).
+        """
+        nu, zinv, hx = terms[4:]
+        inlier = None
+        fit = None
+        for _ in range(self.config.association.outlier_rounds):
+            dx = mode[mi] - x_hat[mi]
+            dx[:, 2] = wrap_angle(dx[:, 2])
+            now = quad_form(nu - (hx @ dx[..., None])[..., 0], zinv) <= gate
+            if inlier is not None and np.array_equal(now, inlier):
+                break
+            inlier = now
+            fit = self._combine(x_hat, mi, terms, lam0, p_det, inlier)
+            mode = fit[0]
+        return inlier, fit
+
+    def _pair_terms(
+        self, x: np.ndarray, mi: np.ndarray, z: np.ndarray, r: np.ndarray, mu: np.ndarray, sig: np.ndarray,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Innovation ν = z − ẑ(x) (P, dim), Z⁻¹ and |Z| with Z = GΣGᵀ + R, and the pose
+        Jacobian Hₓ (P, dim, 3) of P pairs at the poses x (P, 3) of their particles ``mi``."""
+        zhat, g = self.model.predict(x, mu)
+        zinv, zdet = sym_inv_det(g @ sig @ np.swapaxes(g, -1, -2) + r)
+        return self.model.innovation(z, zhat), zinv, zdet, self.model.pose_jacobian(x, mu)
+
+    def _combine(
+        self, x_hat: np.ndarray, mi: np.ndarray, terms: tuple, lam0: np.ndarray, p_det: np.ndarray,
+        keep: np.ndarray | None = None,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The proposal from the prior information ``lam0`` (M, 3, 3) and the per-pair ``terms``
+        of :meth:`_fold` (of the pairs ``keep`` selects, default all): (mode, Λ⁻¹, log
+        marginal likelihood, νᵀS⁻¹ν, observation information), as :meth:`_fold` returns."""
+        m = x_hat.shape[0]
+        info_p, eta_p, quad_p, norm_p = terms[:4]
+        if keep is not None:
+            mi, info_p, eta_p, quad_p, norm_p = (a[keep] for a in (mi, info_p, eta_p, quad_p, norm_p))
+        lam = lam0 + _sum_by(mi, info_p.reshape(-1, 9), m).reshape(m, 3, 3)
+        eta = _sum_by(mi, eta_p, m)
+        quad = np.bincount(mi, quad_p, m)
+        logdet = np.bincount(mi, norm_p, m)
+        cov, lam_det = sym_inv_det(lam)
+        cov = 0.5 * (cov + np.swapaxes(cov, -1, -2))
+        shift = (cov @ eta[..., None])[..., 0]
+        mode = x_hat + shift
+        mode[:, 2] = wrap_angle(mode[:, 2])
+        nis = quad - np.einsum("mi,mi->m", eta, shift)
+        ll = -0.5 * (nis + logdet + np.log(p_det) + np.log(lam_det))
+        return mode, cov, ll, nis, lam - lam0
 
     def _fold(
         self, x_hat: np.ndarray, mi: np.ndarray, z: np.ndarray, r: np.ndarray, mu: np.ndarray,
         sig: np.ndarray, prior_cov: np.ndarray, iterations: int,
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    ) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray], tuple, np.ndarray, np.ndarray]:
         """The Gaussian proposal N(mode, Λ⁻¹) of the poses (M, 3) given the prior N(x̂, P) and
         the pairs (particle mi, z, r, landmark μ, Σ), relinearised ``iterations`` times at the
         mode (iterated EKF: ν = z − ẑ(x_i) + Hₓ(x_i)(x_i − x̂)).
 
         Returns:
-            (mode (M, 3), Λ⁻¹ (M, 3, 3), log marginal likelihood (M,), νᵀS⁻¹ν (M,),
-            observation information Σ HₓᵀZ⁻¹Hₓ (M, 3, 3)).
+            ((mode (M, 3), Λ⁻¹ (M, 3, 3), log marginal likelihood (M,), νᵀS⁻¹ν (M,),
+            observation information Σ HₓᵀZ⁻¹Hₓ (M, 3, 3)); the per-pair terms of the last
+            linearisation (HₓᵀZ⁻¹Hₓ, HₓᵀZ⁻¹ν, νᵀZ⁻¹ν, dim·log 2π + log|Z|, ν, Z⁻¹, Hₓ);
+            P⁻¹ (M, 3, 3) and |P| (M,)).
         """
-        model = self.model
-        m = x_hat.shape[0]
         lam0, p_det = sym_inv_det(prior_cov)
         x_lin = x_hat
+        dim = self.model.dim
         for it in range(iterations):
-            lam = lam0.copy()
-            eta = np.zeros((m, 3))
-            quad = np.zeros(m)
-            logdet = np.zeros(m)
-            if mi.size:
-                xl = x_lin[mi]
-                zhat, g = model.predict(xl, mu)
-                hx = model.pose_jacobian(xl, mu)
-                zinv, zdet = sym_inv_det(g @ sig @ np.swapaxes(g, -1, -2) + r)
-                nu = model.innovation(z, zhat)
-                if it:
-                    dx = xl - x_hat[mi]
-                    dx[:, 2] = wrap_angle(dx[:, 2])
-                    nu = nu + (hx @ dx[..., None])[..., 0]
-                hz = np.swapaxes(hx, -1, -2) @ zinv  # (P, 3, dim)
-                np.add.at(lam, mi, hz @ hx)
-                np.add.at(eta, mi, (hz @ nu[..., None])[..., 0])
-                np.add.at(quad, mi, quad_form(nu, zinv))
-                np.add.at(logdet, mi, model.dim * LOG_2PI + np.log(zdet))
-            cov, lam_det = sym_inv_det(lam)
-            cov = 0.5 * (cov + np.swapaxes(cov, -1, -2))
-            shift = (cov @ eta[..., None])[..., 0]
-            x_lin = x_hat + shift
-            x_lin[:, 2] = wrap_angle(x_lin[:, 2])
-        nis = quad - np.einsum("mi,mi->m", eta, shift)
-        ll = -0.5 * (nis + logdet + np.log(p_det) + np.log(lam_det))
-        return x_lin, cov, ll, nis, lam - lam0
+            xl = x_lin[mi]
+            nu, zinv, zdet, hx = self._pair_terms(xl, mi, z, r, mu, sig)
+            if it:
+                dx = xl - x_hat[mi]
+                dx[:, 2] = wrap_angle(dx[:, 2])
+                nu = nu + (hx @ dx[..., None])[..., 0]
+            hz = np.swapaxes(hx, -1, -2) @ zinv  # (P, 3, dim)
+            terms = (hz @ hx, (hz @ nu[..., None])[..., 0], quad_form(nu, zinv),
+                     dim * LOG_2PI + np.log(zdet), nu, zinv, hx)
+            fit = self._combine(x_hat, mi, terms, lam0, p_det)
+            x_lin = fit[0]
+        return fit, terms, lam0, p_det
 
     def _inform_drift(self, k: int, prior: np.ndarray, info: np.ndarray) -> None:
         """D ← (prior⁻¹ + info)⁻¹: robot k's drift covariance after a landmark update."""

@@ -280,3 +280,47 @@ def test_weight_gain_flattens_the_weights_and_keeps_the_full_score():
     assert neff(exact.log_w) < 0.15 < 0.3 < neff(tempered.log_w)  # 0.12 and 0.33
     with pytest.raises(ValueError):
         FilterConfig(weight_gain=0.5)
+
+
+def _means(slam):
+    """(M, N, 3) landmark means of every particle."""
+    n = slam.landmarks.size
+    return slam.landmarks.gather(np.arange(slam.num_particles)[:, None], np.arange(n)[None], ("mean",))[0].copy()
+
+
+def _look_alike_run(outlier_gate):
+    """One robot standing still sees six landmarks, then (1 s later, pose σ 0.1 m from the
+    random walk) the same six with the sixth's point 0.12 m off: a look-alike."""
+    from mrslam_core.slam.config import MotionConfig
+
+    cfg = FilterConfig(num_particles=50, seed=5, proposal="fastslam2", resample_threshold=0.0,
+                       motion=MotionConfig(sigma_xy_rw=0.1),
+                       association=AssociationConfig(outlier_gate=outlier_gate))
+    slam = MultiRobotFastSLAM(cfg, ["a"], np.zeros((1, 3)))
+    pts = np.array([[2.0, -1.0, 0.5], [2.0, 1.0, 0.5], [3.0, 0.0, 0.3], [2.5, -0.5, 0.8],
+                    [2.5, 0.7, 0.2], [3.0, -0.8, 0.4]])
+    cov = np.broadcast_to(np.eye(3) * 1e-4, (6, 3, 3))
+    desc = np.eye(6, 8, dtype=np.float32)
+    slam.step([RobotUpdate("a", 1, np.zeros(3), _obs("a", 1, pts, cov, desc))])
+    before = _means(slam)
+    seen = pts.copy()
+    seen[5, 1] += 0.12
+    slam.step([RobotUpdate("a", 10**9 + 1, np.zeros(3), _obs("a", 10**9 + 1, seen, cov, desc))])
+    return slam, before
+
+
+def test_a_look_alike_match_is_left_out_of_the_proposal_and_the_map():
+    slam, before = _look_alike_run(11.34)
+    # the association gate lets the pair in (the pose is uncertain), the residual at the mode
+    # fitted to the five right pairs (σ ≈ 0.006 m) is ~72 > 11.34: an outlier in every particle
+    assert slam.outlier_pairs == 50
+    assert slam.landmarks.size == 6  # no landmark started from it
+    mean = slam.poses[:, 0].mean(axis=0)
+    assert np.hypot(*mean[:2]) < 0.004 and abs(mean[2]) < 0.002, mean
+    after = _means(slam)
+    np.testing.assert_array_equal(after[:, 5], before[:, 5])  # the look-alike did not move its landmark
+    assert np.abs(after[:, :5] - before[:, :5]).max() < 0.01
+
+    plain, _ = _look_alike_run(0.0)  # without the gate the six pairs pull the pose −0.12/6 m in y
+    assert plain.outlier_pairs == 0
+    assert plain.poses[:, 0, 1].mean() < -0.015, plain.poses[:, 0].mean(axis=0)

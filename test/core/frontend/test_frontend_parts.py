@@ -146,3 +146,49 @@ def test_colour_and_16bit_pairs_are_converted(frontend_and_pair):
     obs, _ = fe.step(left.astype(np.uint16) << 8, right.astype(np.uint16) << 8, 2)
     assert obs is not None and not fe.drops
     assert fe.step(left, right, 2) == (None, None) and fe.drops == {"stamp_out_of_order": 1}
+
+
+def test_rigid_fit_recovers_a_known_motion_exactly():
+    from mrslam_core.geometry.rigid3d import fit_rigid_3d
+
+    rng = np.random.default_rng(4)
+    src = rng.uniform(-2, 2, (10, 3))
+    a = 0.3
+    rot = np.array([[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]])  # yaw of an optical frame
+    dst = src @ rot.T + [0.1, -0.02, 0.25]
+    r, t = fit_rigid_3d(src, dst)
+    np.testing.assert_allclose(r, rot, atol=1e-12)
+    np.testing.assert_allclose(t, [0.1, -0.02, 0.25], atol=1e-12)
+    mirrored = src * [1, 1, -1]  # a reflection is not a rotation: the fit stays proper
+    r, _ = fit_rigid_3d(src, mirrored)
+    assert np.linalg.det(r) == pytest.approx(1.0)
+
+
+def _tracked_scene(seed, n=12):
+    rng = np.random.default_rng(seed)
+    desc = rng.standard_normal((n, 64)).astype(np.float32)
+    desc /= np.linalg.norm(desc, axis=1, keepdims=True)
+    xy = rng.uniform(20, 300, (n, 2))
+    pts = np.column_stack([rng.uniform(-1.5, 1.5, n), rng.uniform(-0.5, 0.5, n), rng.uniform(1.0, 4.0, n)])
+    cov = np.broadcast_to(np.diag([1e-4, 1e-4, 4e-4]), (n, 3, 3)).copy()
+    a = 0.1  # the camera turned 0.1 rad and moved 5 cm forward: cur = Rᵀ(prev − t)
+    rot = np.array([[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]])
+    moved = (pts - [0.0, 0.0, 0.05]) @ rot + rng.normal(0, 0.005, (n, 3))
+    return xy, desc, pts, moved, cov
+
+
+def test_tracks_that_disagree_with_the_rigid_motion_end():
+    xy, desc, pts, moved, cov = _tracked_scene(5)
+    moved[[2, 7]] += [[0.0, 0.0, 0.4], [0.3, 0.0, 0.0]]  # a wrong disparity, a look-alike
+    tr = Tracker(FrontendConfig(track_consistency_gate=16.27))
+    ids0, _ = tr.update(xy, desc, pts, cov)
+    ids1, len1 = tr.update(xy + 2.0, desc, moved, cov)
+    assert tr.inconsistent == 2
+    assert set(np.flatnonzero(len1 == 1)) == {2, 7}
+    keep = np.setdiff1d(np.arange(12), [2, 7])
+    np.testing.assert_array_equal(ids1[keep], ids0[keep])
+    assert ids1[2] not in ids0 and ids1[7] not in ids0
+    plain = Tracker(FrontendConfig())  # gate 0: descriptors alone decide
+    plain.update(xy, desc, pts, cov)
+    _, len1 = plain.update(xy + 2.0, desc, moved, cov)
+    assert np.all(len1 == 2) and plain.inconsistent == 0
