@@ -42,9 +42,9 @@ def _team_filter() -> FilterConfig:
     # joined points more than 0.3 m apart with E0 = 0.5 (U-SURF look-alikes on the textures),
     # 6-7 % with 0.25.
     # outlier_gate = chi2(3 dof, 0.99): a look-alike that passes the association gate only because
-    # the pose is uncertain is left out of the pose proposal and the map. On the recorded live
-    # demo runs (3 bags x 4 filter seeds, docs/results.md session 7) robots above 0.15 m went
-    # from 13 to 3 of 36; in closed loop (mrslam team, 16 seeds) nearly no change.
+    # the pose is uncertain is left out of the pose proposal and the map. On recorded live demo
+    # runs (4 bags x 8 filter seeds, docs/results.md session 7) robots above 0.15 m went from
+    # 43 to 15 of 96; in closed loop (mrslam team, 16 seeds) 16 to 15 of 48.
     return FilterConfig(
         num_particles=300,
         proposal="fastslam2",
