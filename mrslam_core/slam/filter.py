@@ -487,7 +487,7 @@ class MultiRobotFastSLAM:
                 self.dropped["lost_robot_observation"] += int(counts.min())
                 if self.config.defer_motion_noise:  # the noise stays pending
                     self._noise_drawn = False
-                    return x_hat, usable
+                    return x_hat, usable, inlier
                 mode, cov = x_hat, motion_cov
             else:
                 gate = self.config.association.outlier_gate
