@@ -233,6 +233,18 @@ def test_lost_robot_sets_aside_a_single_landmark_and_keeps_the_map():
     assert np.abs(slam.poses - poses).max() < 0.1  # only motion noise, no pull to the landmark
 
 
+def test_with_deferred_noise_the_set_aside_observation_leaves_the_noise_pending():
+    slam = _lost_robot_filter(defer_motion_noise=True)
+    _, map_before, _, _, _ = slam.best_map()
+    poses = slam.poses.copy()
+    slam.step([RobotUpdate("a", 10**9, np.zeros(3), _rb(np.zeros(3), [2]))])
+    assert slam.dropped["lost_robot_observation"] == 1
+    np.testing.assert_allclose(slam.poses, poses, atol=1e-12)  # zero odometry, noise not drawn
+    assert np.trace(slam.pending_cov[0]) > 0
+    _, map_after, _, _, _ = slam.best_map()
+    np.testing.assert_array_equal(map_after, map_before)
+
+
 def test_without_relocalisation_the_lost_robot_stays_lost():
     from mrslam_core.slam.config import RelocalizationConfig
 
