@@ -123,7 +123,7 @@ class Tracker:
         self._desc = np.asarray(desc, np.float32).copy()
         self._ids = ids.copy()
         self._length = length.copy()
-        if points is not None:
+        if points is not None and self.cfg.track_consistency_gate > 0:
             self._points = np.asarray(points, float).copy()
             self._cov = np.asarray(cov, float).copy()
         else:
