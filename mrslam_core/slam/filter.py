@@ -523,7 +523,6 @@ class MultiRobotFastSLAM:
         """
         nu, zinv, hx = terms[4:]
         inlier = None
-        fit = None
         for _ in range(self.config.association.outlier_rounds):
             dx = mode[mi] - x_hat[mi]
             dx[:, 2] = wrap_angle(dx[:, 2])
@@ -536,10 +535,10 @@ class MultiRobotFastSLAM:
         return inlier, fit
 
     def _pair_terms(
-        self, x: np.ndarray, mi: np.ndarray, z: np.ndarray, r: np.ndarray, mu: np.ndarray, sig: np.ndarray,
+        self, x: np.ndarray, z: np.ndarray, r: np.ndarray, mu: np.ndarray, sig: np.ndarray,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Innovation ν = z − ẑ(x) (P, dim), Z⁻¹ and |Z| with Z = GΣGᵀ + R, and the pose
-        Jacobian Hₓ (P, dim, 3) of P pairs at the poses x (P, 3) of their particles ``mi``."""
+        Jacobian Hₓ (P, dim, 3) of P pairs at the poses x (P, 3) of their particles."""
         zhat, g = self.model.predict(x, mu)
         zinv, zdet = sym_inv_det(g @ sig @ np.swapaxes(g, -1, -2) + r)
         return self.model.innovation(z, zhat), zinv, zdet, self.model.pose_jacobian(x, mu)
@@ -587,7 +586,7 @@ class MultiRobotFastSLAM:
         dim = self.model.dim
         for it in range(iterations):
             xl = x_lin[mi]
-            nu, zinv, zdet, hx = self._pair_terms(xl, mi, z, r, mu, sig)
+            nu, zinv, zdet, hx = self._pair_terms(xl, z, r, mu, sig)
             if it:
                 dx = xl - x_hat[mi]
                 dx[:, 2] = wrap_angle(dx[:, 2])
