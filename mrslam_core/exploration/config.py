@@ -67,6 +67,10 @@ class ExplorationConfig:
             ``bumper_range`` ahead of it is an obstacle (inflated by ``robot_radius``) for
             planning during ``blacklist_period`` (0: off) [s].
         bumper_range: distance from the robot's centre to the front of its body [m].
+        keep_arc: where the pure-pursuit arc is tighter than ``max_speed / max_turn_rate``,
+            slow down to drive it instead of clipping the turn rate and swinging wide (see
+            :func:`~mrslam_core.exploration.planning.pure_pursuit`; measured in docs/results.md,
+            session 8: fewer collisions with door frames, less area explored).
     """
 
     coordinated: bool = True
@@ -92,3 +96,4 @@ class ExplorationConfig:
     unknown_passable: bool = True
     stall_time: float = 0.0
     bumper_range: float = 0.3
+    keep_arc: bool = False

@@ -239,7 +239,7 @@ class Explorer:
             if g is None or self.state is State.COMPLETE:
                 commands[name] = (0.0, 0.0)
                 continue
-            v, w, _ = pure_pursuit(poses[name], g.path, cfg.lookahead, cfg.max_speed, cfg.max_turn_rate)
+            v, w, _ = pure_pursuit(poses[name], g.path, cfg.lookahead, cfg.max_speed, cfg.max_turn_rate, cfg.keep_arc)
             commands[name] = (v, w)
         for name, (v, _) in commands.items():
             track = self.motion.setdefault(name, deque())

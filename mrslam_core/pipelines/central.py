@@ -56,6 +56,9 @@ class CentralConfig:
             odometry over the gap: its observation set is aligned to the best particle's map
             (descriptor matches, RANSAC and least squares, ``fusion`` thresholds) and its
             particles drawn from the fit (stereo points only); 0: never [s].
+        relocalize_when_blind: the gap of ``relocalize_after`` also runs while the robot's sets
+            hold fewer than ``fusion.min_inliers`` points (blind: facing a wall, turning): it moved
+            by odometry alone as much as a silent robot does.
         relocalize_tries: attempts, one a second, before a robot back from a gap is left to
             its odometry (a frame whose matches are bunched up cannot fix the rotation); its
             sets in between move it by odometry only and are counted, not mapped.
@@ -80,6 +83,7 @@ class CentralConfig:
     merge_every: int = 10
     sample_gap: float = 1.0
     relocalize_after: float = 5.0
+    relocalize_when_blind: bool = False
     relocalize_tries: int = 3
     relocalize_gate: float = 0.5
     relocalize_drift: float = 0.1
@@ -151,6 +155,8 @@ class CentralMapper:
         self._latest_obs: dict[str, int] = {}
         self._last: dict[str, tuple[int, np.ndarray]] = {}
         self._reloc_tried: dict[str, int] = {}
+        #: stamp of each robot's last set that could re-localise it (relocalize_when_blind)
+        self._sighted: dict[str, int] = {}
         #: robots back from a gap, not re-localised yet: (attempts left, stamp the gap began)
         self._returning: dict[str, tuple[int, int]] = {}
         self._wait_ns = int(cfg.max_wait * 1e9)
@@ -259,8 +265,12 @@ class CentralMapper:
         filt = self.local.get(obs.robot, self.slam)
         t0 = time.perf_counter()
         motion = between(reference, odom)
-        seen = self._returning[obs.robot][1] if obs.robot in self._returning else (
-            obs.stamp_ns if prev is None else prev[0])
+        if obs.robot in self._returning:
+            seen = self._returning[obs.robot][1]
+        elif prev is None:
+            seen = obs.stamp_ns
+        else:
+            seen = self._sighted.get(obs.robot, prev[0]) if self.cfg.relocalize_when_blind else prev[0]
         gap = (obs.stamp_ns - seen) * 1e-9
         tried = self._reloc_tried.get(obs.robot, seen)
         if (filt is self.slam and 0 < self.cfg.relocalize_after < gap and obs.stamp_ns - tried >= 1e9
@@ -285,6 +295,8 @@ class CentralMapper:
         held = obs.robot in self._returning  # its pose is in doubt: its set must not shape the map
         if held:
             self.drops["awaiting_relocalization"] += 1
+        elif prev is None or len(obs) >= self.cfg.fusion.min_inliers:
+            self._sighted[obs.robot] = obs.stamp_ns
         try:
             filt.step([RobotUpdate(obs.robot, obs.stamp_ns, motion, None if held else obs)])
         except FilterInputError:
@@ -386,7 +398,7 @@ class CentralMapper:
         extra: dict = {"mapper": {
             "robots": self.robots,
             "last": {r: [s, *map(float, p)] for r, (s, p) in self._last.items()},
-            "latest_obs": self._latest_obs, "first_ns": self._first_ns, "now_ns": self.now_ns,
+            "latest_obs": self._latest_obs, "sighted": self._sighted, "first_ns": self._first_ns, "now_ns": self.now_ns,
             "seq": self._seq, "drops": dict(self.drops),
             "queue": [[o.robot, o.stamp_ns] for _, _, _, o in sorted(self._queue, key=lambda e: e[:3])],
         }, "update_ms": np.asarray(self.update_ms, float)}
@@ -419,6 +431,7 @@ class CentralMapper:
             del mapper.local[r]  # merged before the checkpoint (unmerged robots restart mapping)
         mapper._last = {r: (int(v[0]), np.array(v[1:], float)) for r, v in state["last"].items()}
         mapper._latest_obs = {r: int(v) for r, v in state["latest_obs"].items()}
+        mapper._sighted = {r: int(v) for r, v in state.get("sighted", {}).items()}
         mapper._first_ns = state["first_ns"]
         mapper.now_ns, mapper._seq = int(state["now_ns"]), int(state["seq"])
         mapper.drops = Counter(state["drops"])

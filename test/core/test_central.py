@@ -252,10 +252,10 @@ def _seen(robot: str, t: float, pose: np.ndarray, pts: np.ndarray, desc: np.ndar
     return ObservationSet(robot, int(round(t * S)), z, np.tile(np.eye(3) * 1e-4, (len(z), 1, 1)), desc[vis])
 
 
-def _gap_run(truth_after: np.ndarray, **kw) -> tuple[CentralMapper, np.ndarray]:
+def _gap_run(truth_after: np.ndarray, blind: bool = False, **kw) -> tuple[CentralMapper, np.ndarray]:
     """robot1 drives along x at 0.5 m/s with exact odometry and observations until 2 s, is
-    silent until 10 s (odometry: out to x = 2 and back, 2 m), and is then at ``truth_after``
-    while its odometry says (1, 0, 0)."""
+    silent until 10 s (``blind``: its sets hold no points) (odometry: out to x = 2 and back,
+    2 m), and is then at ``truth_after`` while its odometry says (1, 0, 0)."""
     from mrslam_core.slam.config import AssociationConfig
 
     pts, desc = _world()
@@ -267,6 +267,9 @@ def _gap_run(truth_after: np.ndarray, **kw) -> tuple[CentralMapper, np.ndarray]:
         m.add_odometry("robot1", int(round(t * S)), np.array([x, 0.0, 0.0]))
         if t <= 2.0 + 1e-9:
             m.add_observations(_seen("robot1", t, np.array([0.5 * t, 0.0, 0.0]), pts, desc, i))
+        elif blind and t < 10.0 - 1e-9:
+            m.add_observations(ObservationSet("robot1", int(round(t * S)), np.zeros((0, 3)), np.zeros((0, 3, 3)),
+                                              np.zeros((0, desc.shape[1]), np.float32)))
     m.add_observations(_seen("robot1", 10.0, truth_after, pts, desc, 99))
     done = m.process(flush=True)
     return m, done[-1].pose
@@ -281,6 +284,19 @@ def test_a_robot_back_from_a_gap_is_placed_by_its_observations():
     assert e["accepted"] and e["inliers"] >= 6 and abs(e["gap_s"] - 8.0) < 1e-9 and abs(e["travelled_m"] - 2.0) < 0.01
     assert np.hypot(*(pose[:2] - truth[:2])) < 0.03 and abs(pose[2] - truth[2]) < 0.01, pose
     m, pose = _gap_run(truth, relocalize_after=0.0)
+    assert m.relocalizations == [] and np.hypot(*(pose[:2] - truth[:2])) > 0.3, pose
+
+
+def test_a_robot_blind_for_longer_than_the_gap_is_placed_by_its_observations():
+    """Sets without points for 8 s move the robot by odometry alone, as silence does: with
+    ``relocalize_when_blind`` the first set that can be aligned re-localises it; without, the
+    gap is the 0.2 s since its previous (empty) set and nothing is tried."""
+    truth = np.array([1.0, 0.4, 0.1])
+    m, pose = _gap_run(truth, blind=True, relocalize_when_blind=True)
+    (e,) = m.relocalizations
+    assert e["accepted"] and abs(e["gap_s"] - 8.0) < 1e-9 and abs(e["travelled_m"] - 2.0) < 0.05
+    assert np.hypot(*(pose[:2] - truth[:2])) < 0.03 and abs(pose[2] - truth[2]) < 0.01, pose
+    m, pose = _gap_run(truth, blind=True)
     assert m.relocalizations == [] and np.hypot(*(pose[:2] - truth[:2])) > 0.3, pose
 
 

@@ -54,6 +54,44 @@ def test_explore_node_maps_and_drives():
             ex.spin_once(timeout_sec=0.01)
         assert cmds[-1].linear.x == 0 and cmds[-1].angular.z == 0
         assert node.drops["stale_pose"] > 0
-        assert node.drops["scan_before_pose"] <= 1
+        assert node.scans_inserted > 0 and node.drops["scan_without_pose"] <= 1
+    finally:
+        rclpy.shutdown()
+
+
+def test_a_scan_is_laid_at_the_pose_of_its_own_stamp_not_the_latest():
+    """The latest pose is often a frame newer or older than a scan; the wall of a scan stamped
+    at t1 must land where the robot faced at t1 (east), not at t2 (north)."""
+    import rclpy
+    from sensor_msgs.msg import LaserScan
+
+    from mrslam_ros.conversions import ns_to_stamp, pose_with_covariance
+    from mrslam_ros.explore_node import ExploreNode
+
+    rclpy.init()
+    try:
+        node = ExploreNode()
+        t1, t2 = 1_000_000_000, 1_200_000_000
+        east, north = np.array([5.0, 5.0, 0.0]), np.array([5.0, 5.0, np.pi / 2])
+        scan = LaserScan(angle_min=-0.2, angle_increment=0.02, range_min=0.0, range_max=4.0)
+        scan.ranges = [2.0] * 21
+        node.on_pose("robot1", pose_with_covariance(east, np.eye(3) * 1e-4, t1, "map"))
+        node.on_pose("robot1", pose_with_covariance(north, np.eye(3) * 1e-4, t2, "map"))
+        scan.header.stamp = ns_to_stamp(t1)
+        node.on_scan("robot1", scan)
+        def hit_near(x, y):
+            centres = node.grid.centre_of(np.argwhere(node.grid.logodds > 0))
+            return bool(len(centres)) and np.linalg.norm(centres - [x, y], axis=1).min() < 0.1
+
+        assert hit_near(7.0, 5.0) and not hit_near(5.0, 7.0)
+        # a scan whose pose never came is counted once the next pose passes it, and not laid
+        scan.header.stamp = ns_to_stamp(t2 + 100_000_000)
+        node.on_scan("robot1", scan)
+        node.on_pose("robot1", pose_with_covariance(north, np.eye(3) * 1e-4, t2 + 200_000_000, "map"))
+        scan.header.stamp = ns_to_stamp(t2 + 300_000_000)
+        node.on_scan("robot1", scan)
+        node.on_pose("robot1", pose_with_covariance(north, np.eye(3) * 1e-4, t2 + 300_000_000, "map"))
+        assert node.scans_inserted == 2 and node.drops["scan_without_pose"] == 1
+        assert hit_near(5.0, 7.0)
     finally:
         rclpy.shutdown()

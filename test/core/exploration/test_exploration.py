@@ -85,6 +85,26 @@ def test_pure_pursuit_turns_towards_the_path():
     assert v == 0 and w != 0  # target behind: turn on the spot
 
 
+def test_pure_pursuit_with_keep_arc_drives_the_arc_it_aims_at_when_the_turn_rate_saturates():
+    """Into a 90° corner (a door off a corridor) at 0.35 m/s with 0.5 rad/s at most: with
+    ``keep_arc`` the speed drops so the commanded arc is the pure-pursuit arc; clipping the turn
+    rate alone swings the robot 0.157 m off the path (0.7 m turning radius)."""
+    path = np.vstack([np.column_stack([np.arange(0.0, 2.0, 0.05), np.zeros(40)]),
+                      np.column_stack([np.full(41, 2.0), np.arange(0.0, 2.05, 0.05)])])
+    worst = {}
+    for keep in (True, False):
+        pose, worst[keep], dt = np.zeros(3), 0.0, 0.05
+        for _ in range(600):
+            v, w, _ = pure_pursuit(pose, path, 0.4, 0.35, 0.5, keep_arc=keep)
+            assert abs(w) <= 0.5 + 1e-12 and 0.0 <= v <= 0.35
+            pose = pose + dt * np.array([v * np.cos(pose[2]), v * np.sin(pose[2]), w])
+            worst[keep] = max(worst[keep], float(np.linalg.norm(path - pose[:2], axis=1).min()))
+            if np.linalg.norm(pose[:2] - path[-1]) < 0.1:
+                break
+        assert np.linalg.norm(pose[:2] - path[-1]) < 0.1
+    assert worst[True] < 0.12 and worst[False] > 0.15, worst
+
+
 def test_seeded_run_explores_small_world_and_stops():
     sim = TeamSim2D(load_world("small"), 2, ExplorationConfig(return_to_start=True), seed=3)
     curve = sim.run(300)
