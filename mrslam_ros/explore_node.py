@@ -93,15 +93,16 @@ class ExploreNode(Node):
         self._pair(robot, 0, self.pose_stamps[robot], pose)
 
     def on_scan(self, robot: str, msg: LaserScan) -> None:
+        self.scans_received += 1
         self._pair(robot, 1, stamp_to_ns(msg.header.stamp), msg)
 
     def _pair(self, robot: str, stream: int, stamp_ns: int, item) -> None:
-        sync = self.scan_sync[robot]
-        self.scans_received += stream
-        pair = sync.add(stream, stamp_ns, item)
+        """Offer a pose (stream 0) or a scan (stream 1); a pose and a scan of one stamp go into the grid."""
+        pair = self.scan_sync[robot].add(stream, stamp_ns, item)
         if pair is not None:
             self.grid.insert(pair[0], laser_to_scan(pair[1]))
             self.scans_inserted += 1
+        # dropped by the synchroniser (overflow, unmatched, late, duplicate) = neither laid nor waiting
         waiting = sum(s.queued()[1] for s in self.scan_sync.values())
         self.drops["scan_without_pose"] = self.scans_received - self.scans_inserted - waiting
 
