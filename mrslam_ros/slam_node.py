@@ -140,7 +140,7 @@ class SlamNode(Node):
                                                  callback_group=inputs) for r in robots]
         self.unknown: set[str] = set()
         self.latency_ms: deque[float] = deque(maxlen=100_000)
-        self._merges_logged = self._relocs_logged = 0
+        self._merges_logged = self._relocs_logged = self._restarts_logged = 0
         self.create_timer(self.cfg.map_period, self.on_timer)
         self.create_timer(self.cfg.process_period, self.on_process, clock=Clock(clock_type=ClockType.STEADY_TIME))
         if self.cfg.checkpoint:
@@ -257,6 +257,10 @@ class SlamNode(Node):
             else:
                 self.get_logger().warning(f"{e['robot']} back after {e['gap_s']:.1f} s, not re-localised: {e['reason']}")
         self._relocs_logged = len(self.mapper.relocalizations)
+        for e in self.mapper.restarts[self._restarts_logged:]:
+            self.get_logger().warning(f"{e['robot']}: odometry jumped {e['jump_m']:.2f} m / {e['turn_rad']:.2f} rad "
+                                      "(restarted): mapped on its own until its map aligns with the team's")
+        self._restarts_logged = len(self.mapper.restarts)
 
     def on_timer(self) -> None:
         self._look_for_unknown_robots()
@@ -320,6 +324,7 @@ class SlamNode(Node):
             "queued_at_end": self.mapper.queued,
             "merges": self.mapper.merges,
             "relocalizations": self.mapper.relocalizations,
+            "restarts": self.mapper.restarts,
             "outlier_matches": self.mapper.slam.outlier_pairs / self.mapper.slam.num_particles,
             "unmerged": sorted(self.mapper.local),
         }

@@ -26,10 +26,15 @@ import numpy as np
 
 from mrslam_core.evaluation.metrics import interpolate_poses
 from mrslam_core.fusion.config import FusionConfig
-from mrslam_core.geometry.se2 import between
+from mrslam_core.geometry.se2 import between, wrap_angle
 from mrslam_core.slam.config import FilterConfig
 from mrslam_core.slam.filter import FilterInputError, MultiRobotFastSLAM, RobotUpdate
 from mrslam_core.types import ObservationSet
+
+
+#: translation [m] and rotation [rad] an odometry pose may jump beyond odom_reset_speed and
+#: odom_reset_turn_rate times the time since the previous pose (stamp jitter, message bursts)
+ODOM_RESET_FLOOR = (0.1, 0.2)
 
 
 @dataclass(frozen=True)
@@ -70,6 +75,13 @@ class CentralConfig:
             the hole (odometry lost while the central node was down, a driver that stalled); a
             robot turning at 0.5 rad/s at 0.35 m/s leaves a chord up to 2 cm off its arc over
             1 s, 9 cm over 2 s [s].
+        odom_reset_speed: an odometry pose further from the robot's previous one than
+            ``ODOM_RESET_FLOOR`` plus this speed times the time between them is an odometry
+            reset (the robot's driver restarted, its odom frame is new; a robot carried while
+            off): the robot is mapped on its own again from its new odometry origin and merged
+            back by map alignment, as a robot with an unknown start (004 section 5); set it
+            above the fastest robot of the team; 0: never [m/s].
+        odom_reset_turn_rate: the same for the heading [rad/s].
         filter: the multi-robot filter (and each unknown-start robot's local filter).
         fusion: map alignment and joining of unknown-start robots.
     """
@@ -88,6 +100,8 @@ class CentralConfig:
     relocalize_gate: float = 0.5
     relocalize_drift: float = 0.1
     max_odom_gap: float = 1.0
+    odom_reset_speed: float = 2.0
+    odom_reset_turn_rate: float = 6.0
     filter: FilterConfig = field(default_factory=FilterConfig)
     fusion: FusionConfig = field(default_factory=FusionConfig)
 
@@ -145,6 +159,8 @@ class CentralMapper:
         self.merges: list[dict] = []
         #: every re-localisation after a gap: robot, stamp_ns, gap_s, accepted, reason, inliers, shift_m
         self.relocalizations: list[dict] = []
+        #: every odometry reset (a restarted robot): robot, stamp_ns, jump_m, turn_rad
+        self.restarts: list[dict] = []
         self.drops: Counter[str] = Counter()
         self.update_ms: list[float] = []
         self.trajectory: dict[str, list[tuple[int, np.ndarray]]] = {r: [] for r in robots}
@@ -177,8 +193,34 @@ class CentralMapper:
         if buf and stamp_ns <= buf[-1][0]:
             self.drops["odometry_out_of_order" if stamp_ns < buf[-1][0] else "odometry_duplicate_stamp"] += 1
             return False
+        if buf and self._is_reset(buf[-1], int(stamp_ns), pose):
+            self._restart(robot, int(stamp_ns), pose)
         buf.append((int(stamp_ns), pose))
         return True
+
+    def _is_reset(self, last: tuple[int, np.ndarray], stamp_ns: int, pose: np.ndarray) -> bool:
+        """Whether ``pose`` at ``stamp_ns`` jumped from ``last`` (stamp, pose) faster than a robot drives."""
+        cfg = self.cfg
+        dt = (stamp_ns - last[0]) * 1e-9
+        jump = float(np.hypot(*(pose[:2] - last[1][:2])))
+        turn = abs(float(wrap_angle(pose[2] - last[1][2])))
+        return (cfg.odom_reset_speed > 0 and jump > ODOM_RESET_FLOOR[0] + cfg.odom_reset_speed * dt) or (
+            cfg.odom_reset_turn_rate > 0 and turn > ODOM_RESET_FLOOR[1] + cfg.odom_reset_turn_rate * dt)
+
+    def _restart(self, robot: str, stamp_ns: int, pose: np.ndarray) -> None:
+        """``robot``'s odometry restarted at ``stamp_ns``: forget its odometry and gap state and
+        give it a new local filter (K = 1) from the new odometry origin, merged into the map like
+        a robot with an unknown start. Its queued sets older than the reset find no odometry and
+        are dropped (``no_odometry_at_stamp``)."""
+        last = self._odom[robot][-1][1]
+        self.restarts.append({"robot": robot, "stamp_ns": stamp_ns, "jump_m": float(np.hypot(*(pose[:2] - last[:2]))),
+                              "turn_rad": float(wrap_angle(pose[2] - last[2]))})
+        self.drops["odometry_reset"] += 1
+        self._odom[robot].clear()
+        for state in (self._last, self._returning, self._reloc_tried, self._sighted):
+            state.pop(robot, None)
+        self.local[robot] = MultiRobotFastSLAM(self.cfg.filter, [robot], np.zeros((1, 3)))
+        self._local_updates[robot] = 0
 
     def add_observations(self, obs: ObservationSet) -> bool:
         """Queue an observation set (base_link of ``obs.robot``); False if dropped."""
@@ -328,7 +370,7 @@ class CentralMapper:
         redrawn (logged in :attr:`relocalizations` either way)."""
         from mrslam_core.fusion.alignment import ransac_align
         from mrslam_core.fusion.maps import FusionError, LandmarkMap
-        from mrslam_core.geometry.se2 import compose, wrap_angle
+        from mrslam_core.geometry.se2 import compose
 
         slam, k = self.slam, self.slam.index[obs.robot]
         dead = compose(slam.estimate().mean[k], motion)
@@ -399,7 +441,7 @@ class CentralMapper:
             "robots": self.robots,
             "last": {r: [s, *map(float, p)] for r, (s, p) in self._last.items()},
             "latest_obs": self._latest_obs, "sighted": self._sighted, "first_ns": self._first_ns, "now_ns": self.now_ns,
-            "seq": self._seq, "drops": dict(self.drops),
+            "seq": self._seq, "drops": dict(self.drops), "unmerged": sorted(self.local), "restarts": self.restarts,
             "queue": [[o.robot, o.stamp_ns] for _, _, _, o in sorted(self._queue, key=lambda e: e[:3])],
         }, "update_ms": np.asarray(self.update_ms, float)}
         for i, (_, _, _, o) in enumerate(sorted(self._queue, key=lambda e: e[:3])):
@@ -427,8 +469,10 @@ class CentralMapper:
             raise CheckpointError(f"{path}: saved for robots {state and state.get('robots')}, not {list(cfg.robots)}")
         mapper = cls(cfg)
         mapper.slam = slam
-        for r in [r for r in mapper.local if r in slam.index]:
-            del mapper.local[r]  # merged before the checkpoint (unmerged robots restart mapping)
+        # robots not merged at the checkpoint (unknown start, or restarted) start their own maps again
+        unmerged = state.get("unmerged", [r for r in mapper.local if r not in slam.index])
+        mapper.local = {r: MultiRobotFastSLAM(cfg.filter, [r], np.zeros((1, 3))) for r in unmerged}
+        mapper.restarts = list(state.get("restarts", []))
         mapper._last = {r: (int(v[0]), np.array(v[1:], float)) for r, v in state["last"].items()}
         mapper._latest_obs = {r: int(v) for r, v in state["latest_obs"].items()}
         mapper._sighted = {r: int(v) for r, v in state.get("sighted", {}).items()}
