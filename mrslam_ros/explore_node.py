@@ -109,11 +109,14 @@ class ExploreNode(Node):
     def control(self) -> None:
         if len(self.poses) < len(self.cfg.robots):
             return  # every robot must have a pose before targets are shared out
-        stalls = self.explorer.stalls
+        stalls, held = self.explorer.stalls, self.explorer.held
         commands = self.explorer.step(self.grid, self.poses, self.now_ns * 1e-9)
         if self.explorer.stalls > stalls:
             self.get_logger().warning(f"a robot stalled (commanded forward, did not move): backing off; "
                                       f"{self.explorer.stalls} stalls so far")
+        if self.explorer.held > held:
+            self.get_logger().info(f"a robot waits for another in its way (keep_clear); {self.explorer.held} "
+                                   "commands held so far", throttle_duration_sec=5.0)
         clock_ns = self.get_clock().now().nanoseconds
         for robot, (v, w) in commands.items():
             if clock_ns - self.pose_stamps[robot] > self.cfg.pose_timeout * 1e9:

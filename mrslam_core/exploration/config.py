@@ -71,6 +71,17 @@ class ExplorationConfig:
             slow down to drive it instead of clipping the turn rate and swinging wide (see
             :func:`~mrslam_core.exploration.planning.pure_pursuit`; measured in docs/results.md,
             session 8: fewer collisions with door frames, less area explored).
+        keep_clear: distance [m] between robot centres (base_link) that robots keep from each
+            other: a robot's path keeps this far from the other robots' positions where there is
+            room, and a robot does not drive forward (backward) while another robot's centre is
+            within it in front of (behind) its axle; it turns on the spot, waits, or is given a
+            path around. Two robots whose bodies swing out to ``r`` when turning need more than
+            2·r between centres to turn freely (0: off).
+        start_delay: each robot stands still this long from its first pose on, so that the map
+            is started from the known start poses: before a robot's first landmarks nothing can
+            tell its particles' motion noise apart, and the landmarks it maps first fix the
+            heading of everything mapped from them; a stereo frontend publishes a point once it
+            is tracked over 3 frames [s].
     """
 
     coordinated: bool = True
@@ -97,3 +108,5 @@ class ExplorationConfig:
     stall_time: float = 0.0
     bumper_range: float = 0.3
     keep_arc: bool = False
+    keep_clear: float = 0.0
+    start_delay: float = 0.0

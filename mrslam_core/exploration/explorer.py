@@ -38,25 +38,37 @@ def surroundings(grid: OccupancyGrid, xy: np.ndarray, robot_radius: float) -> np
     return (rr - r0) ** 2 + (cc - c0) ** 2 <= (robot_radius / grid.res + 2) ** 2
 
 
-def bumper_cells(grid: OccupancyGrid, bumps: list[np.ndarray], radius: float) -> np.ndarray:
-    """(H, W) bool: the cells within ``radius`` [m] of a bumper hit, each (x, y) [m] map frame."""
+def disc_cells(grid: OccupancyGrid, centres: list[np.ndarray], radius: float) -> np.ndarray:
+    """(H, W) bool: the cells within ``radius`` [m] of any of ``centres``, each (x, y) [m] map
+    frame (bumper hits, other robots)."""
     out = np.zeros(grid.shape, bool)
-    for xy in bumps:
+    for xy in centres:
         out |= surroundings(grid, xy, radius - 2 * grid.res)
     return out
+
+
+def ahead_within(pose: np.ndarray, others: list[np.ndarray], distance: float, direction: float = 1.0) -> bool:
+    """Whether any of ``others`` (x, y, ...) [m] lies within ``distance`` [m] of ``pose`` (x, y, θ)
+    and on the side it drives to: in front (``direction`` > 0) or behind (< 0) of its axle."""
+    heading = np.array([np.cos(pose[2]), np.sin(pose[2])])
+    for other in others:
+        d = np.asarray(other, float)[:2] - pose[:2]
+        if np.hypot(*d) < distance and direction * float(d @ heading) > 0:
+            return True
+    return False
 
 
 def planning_layers(grid: OccupancyGrid, poses: list[np.ndarray], cfg: ExplorationConfig,
                     bumps: list[np.ndarray] = ()) -> tuple[np.ndarray, np.ndarray]:
     """What paths may cross: (passable (H, W) bool for A*, occupancy (H, W) for the travel cost).
 
-    Obstacles (occupied cells and ``bumps``, see :func:`bumper_cells`) are inflated by
+    Obstacles (occupied cells and ``bumps``, see :func:`disc_cells`) are inflated by
     ``robot_radius``. Without ``unknown_passable`` only cells observed free are passable and
     unobserved ones cost like obstacles, except within the robot's radius (+ 2 cells) of a robot's
     pose (x, y, θ): the ground under and just around a robot is never in view, and it must be able
     to leave it.
     """
-    blocked = grid.occupied() | bumper_cells(grid, list(bumps), cfg.bumper_range / 2)
+    blocked = grid.occupied() | disc_cells(grid, list(bumps), cfg.bumper_range / 2)
     prob = np.where(blocked, 1.0, grid.probability())
     passable = ~inflate(blocked, cfg.robot_radius / grid.res)
     if not cfg.unknown_passable:
@@ -92,6 +104,10 @@ class Explorer:
     bumps: list[np.ndarray] = field(default_factory=list)
     bump_until: list[float] = field(default_factory=list)
     stalls: int = 0
+    #: follower commands held at v = 0 because another robot stood in the way (``keep_clear``)
+    held: int = 0
+    #: per robot, the time of its first pose [s] (``start_delay``)
+    first_seen: dict[str, float] = field(default_factory=dict)
     #: per robot, recent (time [s], x, y, commanded v [m/s]) for the stall check
     motion: dict[str, deque] = field(default_factory=dict)
 
@@ -148,15 +164,32 @@ class Explorer:
         goal = tuple(np.clip(grid.cell_of(target), 0, np.array(grid.shape) - 1))
         # a robot standing closer than its radius to an obstacle may leave through inflated
         # cells around it (never through occupied ones)
-        near = surroundings(grid, poses[name][:2], self.config.robot_radius)
-        path = astar(passable | (near & ~grid.occupied() & ~bumper_cells(grid, self.bumps, self.config.bumper_range / 2)),
-                     start, goal)
+        cfg = self.config
+        near = surroundings(grid, poses[name][:2], cfg.robot_radius)
+        leave = near & ~grid.occupied() & ~disc_cells(grid, self.bumps, cfg.bumper_range / 2)
+        others = [np.asarray(poses[o])[:2] for o in self.robots if o != name]
+        path = None
+        if cfg.keep_clear > 0 and others:
+            # around the other robots where there is room; else the plain path, on which the
+            # follower waits for a robot in the way (see step)
+            crowd = disc_cells(grid, others, cfg.keep_clear)
+            path = astar((passable & ~crowd) | (leave & ~disc_cells(grid, others, cfg.keep_clear / 2)), start, goal)
+        if path is None:
+            path = astar(passable | leave, start, goal)
         if path is None:
             self._strike(np.asarray(target, float), now)
             self.goals[name] = None
             return
         path_xy = grid.centre_of(np.array(path))
         self.goals[name] = Goal(np.asarray(target, float), path_xy, now)
+
+    def _robot_ahead(self, name: str, poses: dict[str, np.ndarray], direction: float) -> bool:
+        """Whether another robot stands within ``keep_clear`` of ``name`` on the side it would
+        drive to (``direction`` > 0 forward, < 0 backward)."""
+        if self.config.keep_clear <= 0:
+            return False
+        others = [poses[o] for o in self.robots if o != name and o in poses]
+        return ahead_within(np.asarray(poses[name], float), others, self.config.keep_clear, direction)
 
     def _strike(self, target: np.ndarray, now: float) -> None:
         """A goal failed (no path, or no headway): block it for a while; after ``max_strikes``
@@ -201,6 +234,7 @@ class Explorer:
         cfg = self.config
         for name in self.robots:
             self.starts.setdefault(name, np.asarray(poses[name], float).copy())
+            self.first_seen.setdefault(name, now)
         live = [i for i, until in enumerate(self.bump_until) if now < until]
         self.bumps, self.bump_until = [self.bumps[i] for i in live], [self.bump_until[i] for i in live]
         due = now - self.last_plan_s >= cfg.replan_period
@@ -209,8 +243,9 @@ class Explorer:
             due = True  # the map changed: frontiers may have moved
         for name in self.robots:
             g = self.goals.get(name)
+            if g is None or self._robot_ahead(name, poses, 1.0):
+                due |= now - self.last_plan_s >= 1.0  # idle or held robots ask again, at most once a second
             if g is None:
-                due |= now - self.last_plan_s >= 1.0  # idle robots ask again, at most once a second
                 continue
             d = float(np.linalg.norm(poses[name][:2] - g.target))
             where, since = self.checkpoints.setdefault(name, (poses[name][:2].copy(), now))
@@ -236,11 +271,15 @@ class Explorer:
             if now < self.recovering_until.get(name, -np.inf) and self.state is not State.COMPLETE:
                 commands[name] = (-cfg.recovery_speed, 0.0)
                 continue
-            if g is None or self.state is State.COMPLETE:
+            if g is None or self.state is State.COMPLETE or now - self.first_seen[name] < cfg.start_delay:
                 commands[name] = (0.0, 0.0)
                 continue
             v, w, _ = pure_pursuit(poses[name], g.path, cfg.lookahead, cfg.max_speed, cfg.max_turn_rate, cfg.keep_arc)
             commands[name] = (v, w)
+        for name, (v, w) in commands.items():
+            if v != 0.0 and self._robot_ahead(name, poses, np.sign(v)):
+                commands[name] = (0.0, w)  # never drive into another robot's clearance
+                self.held += 1
         for name, (v, _) in commands.items():
             track = self.motion.setdefault(name, deque())
             track.append((now, *np.asarray(poses[name], float)[:2], v))

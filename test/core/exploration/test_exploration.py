@@ -205,3 +205,76 @@ def test_a_robot_that_follows_its_commands_never_stalls():
         v, w = ex.step(grid, {"r": pose}, 0.2 * i)["r"]
         pose = pose + 0.2 * np.array([v * np.cos(pose[2]), v * np.sin(pose[2]), w])
     assert ex.bumps == [] and ex.strikes == [] and pose[0] > 2.0
+
+
+@pytest.mark.parametrize("keep_clear", [0.0, 0.9])
+def test_a_path_keeps_clear_of_another_robot_where_there_is_room(keep_clear):
+    """robot1 at (0.5, 2.0) is sent to the frontier at x = 4 m; robot2 stands at (2.0, 2.0), on
+    the straight line. With ``keep_clear`` the path keeps 0.9 m from robot2's centre (the disc
+    is exact to one cell); without it the path runs through robot2."""
+    from mrslam_core.exploration.explorer import Explorer, planning_layers
+
+    grid = _open_room()
+    cfg = ExplorationConfig(robot_radius=0.2, min_target_distance=0.5, keep_clear=keep_clear)
+    ex = Explorer(cfg, ["robot1", "robot2"])
+    poses = {"robot1": np.array([0.5, 2.0, 0.0]), "robot2": np.array([2.0, 2.0, np.pi / 2])}
+    passable, _ = planning_layers(grid, list(poses.values()), cfg)
+    ex._set_goal("robot1", np.array([3.95, 2.05]), grid, passable, poses, 0.0)
+    d = np.linalg.norm(ex.goals["robot1"].path - poses["robot2"][:2], axis=1)
+    if keep_clear:
+        assert d.min() >= keep_clear - grid.res / 2, d.min()
+    else:
+        assert d.min() < 0.1, d.min()
+
+
+def test_a_path_through_another_robot_is_kept_when_there_is_no_room_around_it():
+    """In a 1 m wide corridor a robot 1.5 m ahead leaves no room for 0.9 m clearance: the goal
+    keeps its plain path (the follower waits for the other robot instead of giving the goal up)."""
+    from mrslam_core.exploration.explorer import Explorer, planning_layers
+
+    grid = OccupancyGrid(GridConfig(resolution=0.1, size=(6.0, 4.0), origin=(0.0, 0.0)))
+    grid.observed[15:25, :] = True
+    grid.logodds[15:25, :] = -3.0
+    cfg = ExplorationConfig(robot_radius=0.2, keep_clear=0.9)
+    ex = Explorer(cfg, ["robot1", "robot2"])
+    poses = {"robot1": np.array([0.5, 2.0, 0.0]), "robot2": np.array([2.0, 2.0, 0.0])}
+    passable, _ = planning_layers(grid, list(poses.values()), cfg)
+    ex._set_goal("robot1", np.array([5.0, 2.0]), grid, passable, poses, 0.0)
+    assert ex.goals["robot1"] is not None and ex.strikes == []
+
+
+def test_the_follower_holds_a_robot_that_would_drive_into_another():
+    """robot1 at (0.5, 2.0) facing east is given a straight path to the frontier while robot2 is
+    far away; 0.2 s later robot2 stands 0.6 m in front of it: robot1 gets v = 0 (it may still
+    turn). robot2 0.6 m behind or 0.8 m beside it: robot1 drives on. Off (keep_clear = 0): robot1
+    drives into robot2. A backing-up robot is held by a robot behind it."""
+    from mrslam_core.exploration.explorer import Explorer, ahead_within
+
+    grid = _open_room()
+    me = np.array([0.5, 2.0, 0.0])
+    for keep_clear, other, moves in [(0.9, [1.1, 2.0], False), (0.9, [-0.1, 2.0], True),
+                                     (0.9, [0.5, 2.8], True), (0.0, [1.1, 2.0], True)]:
+        ex = Explorer(ExplorationConfig(robot_radius=0.2, min_target_distance=0.5, keep_clear=keep_clear),
+                      ["robot1", "robot2"])
+        v, _ = ex.step(grid, {"robot1": me, "robot2": np.array([0.3, 3.8, 0.0])}, 0.0)["robot1"]
+        assert v > 0.05
+        v, _ = ex.step(grid, {"robot1": me, "robot2": np.array([*other, np.pi])}, 0.2)["robot1"]
+        assert (v > 0.05) == moves, (keep_clear, other, v)
+        assert ex.held == (0 if moves else 1)
+    assert ahead_within(me, [np.array([0.0, 2.0])], 0.9, direction=-1.0)
+    assert not ahead_within(me, [np.array([0.0, 2.0])], 0.9, direction=1.0)
+    assert not ahead_within(me, [np.array([1.5, 2.0])], 0.9, direction=1.0)
+
+
+def test_robots_stand_still_at_the_start_for_start_delay():
+    """With start_delay 1 s a robot gets (0, 0) for its first second, counted from its own first
+    pose (a robot heard later waits from then), and then drives to its goal."""
+    from mrslam_core.exploration.explorer import Explorer
+
+    grid = _open_room()
+    ex = Explorer(ExplorationConfig(robot_radius=0.2, min_target_distance=0.5, start_delay=1.0), ["r"])
+    pose = np.array([0.5, 2.0, 0.0])
+    cmds = [ex.step(grid, {"r": pose}, 5.0 + 0.2 * i)["r"] for i in range(7)]  # 5.0 ... 6.2 s
+    assert all(c == (0.0, 0.0) for c in cmds[:5]), cmds
+    assert cmds[5][0] > 0.1 and cmds[6][0] > 0.1, cmds
+    assert ex.goals["r"] is not None  # the goal was planned while it waited
