@@ -152,8 +152,8 @@ class CentralMapper:
         known = [r for r in robots if r not in unknown]
         starts = starts.reshape(len(robots), 3)
         self.slam = MultiRobotFastSLAM(cfg.filter, known, starts[[robots.index(r) for r in known]])
-        #: unknown-start robots not merged yet: their local filters (K = 1, own start frame)
-        self.local = {r: MultiRobotFastSLAM(cfg.filter, [r], np.zeros((1, 3))) for r in unknown}
+        #: unknown-start (or restarted) robots not merged yet: their local filters (K = 1, own start frame)
+        self.local = {r: self._local_filter(r) for r in unknown}
         self._local_updates: Counter[str] = Counter()
         #: every alignment attempt: robot, stamp_ns, accepted, reason, inliers, rmse_m, transform
         self.merges: list[dict] = []
@@ -193,34 +193,36 @@ class CentralMapper:
         if buf and stamp_ns <= buf[-1][0]:
             self.drops["odometry_out_of_order" if stamp_ns < buf[-1][0] else "odometry_duplicate_stamp"] += 1
             return False
-        if buf and self._is_reset(buf[-1], int(stamp_ns), pose):
-            self._restart(robot, int(stamp_ns), pose)
+        if buf:
+            self._check_reset(robot, int(stamp_ns), pose)
         buf.append((int(stamp_ns), pose))
         return True
 
-    def _is_reset(self, last: tuple[int, np.ndarray], stamp_ns: int, pose: np.ndarray) -> bool:
-        """Whether ``pose`` at ``stamp_ns`` jumped from ``last`` (stamp, pose) faster than a robot drives."""
+    def _check_reset(self, robot: str, stamp_ns: int, pose: np.ndarray) -> None:
+        """If ``pose`` at ``stamp_ns`` jumped from the robot's previous odometry pose faster than a
+        robot drives, its odometry restarted: forget its odometry and gap state and give it a new
+        local filter from the new odometry origin, merged into the map like a robot with an
+        unknown start. Its queued sets older than the reset find no odometry and are dropped
+        (``no_odometry_at_stamp``)."""
         cfg = self.cfg
-        dt = (stamp_ns - last[0]) * 1e-9
-        jump = float(np.hypot(*(pose[:2] - last[1][:2])))
-        turn = abs(float(wrap_angle(pose[2] - last[1][2])))
-        return (cfg.odom_reset_speed > 0 and jump > ODOM_RESET_FLOOR[0] + cfg.odom_reset_speed * dt) or (
-            cfg.odom_reset_turn_rate > 0 and turn > ODOM_RESET_FLOOR[1] + cfg.odom_reset_turn_rate * dt)
-
-    def _restart(self, robot: str, stamp_ns: int, pose: np.ndarray) -> None:
-        """``robot``'s odometry restarted at ``stamp_ns``: forget its odometry and gap state and
-        give it a new local filter (K = 1) from the new odometry origin, merged into the map like
-        a robot with an unknown start. Its queued sets older than the reset find no odometry and
-        are dropped (``no_odometry_at_stamp``)."""
-        last = self._odom[robot][-1][1]
-        self.restarts.append({"robot": robot, "stamp_ns": stamp_ns, "jump_m": float(np.hypot(*(pose[:2] - last[:2]))),
-                              "turn_rad": float(wrap_angle(pose[2] - last[2]))})
+        last_ns, last = self._odom[robot][-1]
+        dt = (stamp_ns - last_ns) * 1e-9
+        jump = float(np.hypot(*(pose[:2] - last[:2])))
+        turn = float(wrap_angle(pose[2] - last[2]))
+        if not ((cfg.odom_reset_speed > 0 and jump > ODOM_RESET_FLOOR[0] + cfg.odom_reset_speed * dt) or (
+                cfg.odom_reset_turn_rate > 0 and abs(turn) > ODOM_RESET_FLOOR[1] + cfg.odom_reset_turn_rate * dt)):
+            return
+        self.restarts.append({"robot": robot, "stamp_ns": stamp_ns, "jump_m": jump, "turn_rad": turn})
         self.drops["odometry_reset"] += 1
         self._odom[robot].clear()
         for state in (self._last, self._returning, self._reloc_tried, self._sighted):
             state.pop(robot, None)
-        self.local[robot] = MultiRobotFastSLAM(self.cfg.filter, [robot], np.zeros((1, 3)))
+        self.local[robot] = self._local_filter(robot)
         self._local_updates[robot] = 0
+
+    def _local_filter(self, robot: str) -> MultiRobotFastSLAM:
+        """A K = 1 filter for ``robot`` from the origin of its own (odometry) frame."""
+        return MultiRobotFastSLAM(self.cfg.filter, [robot], np.zeros((1, 3)))
 
     def add_observations(self, obs: ObservationSet) -> bool:
         """Queue an observation set (base_link of ``obs.robot``); False if dropped."""
@@ -471,7 +473,7 @@ class CentralMapper:
         mapper.slam = slam
         # robots not merged at the checkpoint (unknown start, or restarted) start their own maps again
         unmerged = state.get("unmerged", [r for r in mapper.local if r not in slam.index])
-        mapper.local = {r: MultiRobotFastSLAM(cfg.filter, [r], np.zeros((1, 3))) for r in unmerged}
+        mapper.local = {r: mapper._local_filter(r) for r in unmerged}
         mapper.restarts = list(state.get("restarts", []))
         mapper._last = {r: (int(v[0]), np.array(v[1:], float)) for r, v in state["last"].items()}
         mapper._latest_obs = {r: int(v) for r, v in state["latest_obs"].items()}
