@@ -188,7 +188,7 @@ class Explorer:
         drive to (``direction`` > 0 forward, < 0 backward)."""
         if self.config.keep_clear <= 0:
             return False
-        others = [poses[o] for o in self.robots if o != name and o in poses]
+        others = [poses[o] for o in self.robots if o != name]
         return ahead_within(np.asarray(poses[name], float), others, self.config.keep_clear, direction)
 
     def _strike(self, target: np.ndarray, now: float) -> None:
