@@ -33,7 +33,7 @@ mrclam: venv
 	$(VENV)/bin/mrslam mrclam $(DATA)/mrclam/dataset6 --out runs/mrclam
 
 test: venv
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q --durations=15
 
 bench: venv
 	$(VENV)/bin/mrslam bench filter --out runs/bench

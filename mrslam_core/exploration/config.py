@@ -42,6 +42,11 @@ class ExplorationConfig:
         robot_radius: obstacles are inflated by this for planning [m].
         min_target_distance: frontier targets closer than this to the robot are skipped (the
             unknown just behind a robot with a forward-looking sensor is not worth a goal) [m].
+        avoid_others: frontier targets closer than ``min_target_distance`` to any robot of the
+            team are skipped, not only those near the robot itself: the ground around a robot
+            is never in view (its own camera looks ahead), so its frontier is not worth a goal,
+            and a teammate sent there drives into it (robots starting 1 m apart were sent to
+            each other's start spots and wedged against each other).
         goal_tolerance: a goal counts as reached within this distance [m].
         replan_period: re-assign targets at least this often [s].
         replan_new_area: re-assign sooner (at most once a second) when this much new area has
@@ -59,6 +64,10 @@ class ExplorationConfig:
             sensor that sees every obstacle before the robot reaches it). False: only cells
             observed free (for stereo cameras, which cannot see a wall nearer than their near
             limit and would otherwise plan through it once they stand close to it).
+        unknown_cost: with ``unknown_passable``, a path's step into a cell never observed costs
+            this many times a step into an observed one (>= 1; 1: no difference): paths keep to
+            space seen free where the detour is short, instead of cutting across the unseen
+            ground beside the robot, where a stereo camera looking ahead has not seen the wall.
         stall_time: a robot commanded forward for this long (at 0.1 m/s or more on average) that
             covered less than a quarter of the commanded distance is blocked by something its
             sensor does not show (a wall nearer than a stereo camera's near limit, a door frame
@@ -91,6 +100,7 @@ class ExplorationConfig:
     min_frontier_cells: int = 5
     robot_radius: float = 0.35
     min_target_distance: float = 1.0
+    avoid_others: bool = False
     goal_tolerance: float = 0.4
     replan_period: float = 4.0
     replan_new_area: float = 4.0
@@ -105,8 +115,13 @@ class ExplorationConfig:
     max_turn_rate: float = 1.2
     lookahead: float = 0.4
     unknown_passable: bool = True
+    unknown_cost: float = 1.0
     stall_time: float = 0.0
     bumper_range: float = 0.3
     keep_arc: bool = False
     keep_clear: float = 0.0
     start_delay: float = 0.0
+
+    def __post_init__(self) -> None:
+        if not self.unknown_cost >= 1.0:
+            raise ValueError("unknown_cost must be >= 1")

@@ -149,6 +149,9 @@ class Explorer:
         far_cost = cost.copy()
         for i, name in enumerate(self.robots):
             far_cost[i, np.linalg.norm(txy - poses[name][:2], axis=1) < cfg.min_target_distance] = np.inf
+        if cfg.avoid_others:
+            for name in self.robots:  # the unseen ground around a robot: another one would drive into it
+                far_cost[:, np.linalg.norm(txy - poses[name][:2], axis=1) < cfg.min_target_distance] = np.inf
         chosen = assign_targets(txy, far_cost, cfg.beta, cfg.utility_range, cfg.coordinated)
         for i in np.flatnonzero(chosen < 0):  # only near frontiers left: turn and look at them
             if np.isfinite(cost[i]).any():
@@ -168,14 +171,15 @@ class Explorer:
         near = surroundings(grid, poses[name][:2], cfg.robot_radius)
         leave = near & ~grid.occupied() & ~disc_cells(grid, self.bumps, cfg.bumper_range / 2)
         others = [np.asarray(poses[o])[:2] for o in self.robots if o != name]
+        cost = np.where(grid.observed, 1.0, cfg.unknown_cost) if cfg.unknown_cost > 1 else None
         path = None
         if cfg.keep_clear > 0 and others:
             # around the other robots where there is room; else the plain path, on which the
             # follower waits for a robot in the way (see step)
             crowd = disc_cells(grid, others, cfg.keep_clear)
-            path = astar((passable & ~crowd) | (leave & ~disc_cells(grid, others, cfg.keep_clear / 2)), start, goal)
+            path = astar((passable & ~crowd) | (leave & ~disc_cells(grid, others, cfg.keep_clear / 2)), start, goal, cost)
         if path is None:
-            path = astar(passable | leave, start, goal)
+            path = astar(passable | leave, start, goal, cost)
         if path is None:
             self._strike(np.asarray(target, float), now)
             self.goals[name] = None

@@ -26,7 +26,7 @@ import numpy as np
 
 from mrslam_core.evaluation.metrics import interpolate_poses
 from mrslam_core.fusion.config import FusionConfig
-from mrslam_core.geometry.se2 import between, wrap_angle
+from mrslam_core.geometry.se2 import between, compose, transform_points, wrap_angle
 from mrslam_core.slam.config import FilterConfig
 from mrslam_core.slam.filter import FilterInputError, MultiRobotFastSLAM, RobotUpdate
 from mrslam_core.types import ObservationSet
@@ -82,6 +82,13 @@ class CentralConfig:
             back by map alignment, as a robot with an unknown start (004 section 5); set it
             above the fastest robot of the team; 0: never [m/s].
         odom_reset_turn_rate: the same for the heading [rad/s].
+        teammate_radius: stereo points within this horizontal distance of another robot's
+            estimated position (base_link), and lower than ``teammate_height``, are that robot's
+            body, not landmarks: they are left out of the set and counted (``on_teammate``, in
+            points). Robots see each other; mapped as landmarks, a teammate's corners would move
+            away with it and pull whoever associates them. Covers the body and the pose's
+            uncertainty (a P3-DX's rear corner is 0.33 m from the axle); 0: off [m].
+        teammate_height: top of the robots' bodies and sensor heads above the floor [m].
         filter: the multi-robot filter (and each unknown-start robot's local filter).
         fusion: map alignment and joining of unknown-start robots.
     """
@@ -102,6 +109,8 @@ class CentralConfig:
     max_odom_gap: float = 1.0
     odom_reset_speed: float = 2.0
     odom_reset_turn_rate: float = 6.0
+    teammate_radius: float = 0.0
+    teammate_height: float = 0.6
     filter: FilterConfig = field(default_factory=FilterConfig)
     fusion: FusionConfig = field(default_factory=FusionConfig)
 
@@ -336,6 +345,7 @@ class CentralMapper:
                 motion = between(mid, odom)
             except FilterInputError:
                 pass
+        obs = self._without_teammates(obs, odom)
         held = obs.robot in self._returning  # its pose is in doubt: its set must not shape the map
         if held:
             self.drops["awaiting_relocalization"] += 1
@@ -360,6 +370,46 @@ class CentralMapper:
         if merged:
             self.trajectory[obs.robot].append((obs.stamp_ns, est.mean[k].copy()))
         return Processed(obs.robot, obs.stamp_ns, est.mean[k].copy(), est.cov[k].copy(), odom, ms, merged)
+
+    def _pose_at(self, robot: str, odom: np.ndarray) -> np.ndarray | None:
+        """Where ``robot`` is when its odometry reads ``odom`` (3,): its last estimate moved on by
+        its odometry since (map frame, or its own start frame while not merged); None before
+        its first update."""
+        if not self.trajectory[robot] or robot not in self._last:
+            return None
+        return compose(self.trajectory[robot][-1][1], between(self._last[robot][1], odom))
+
+    def _without_teammates(self, obs: ObservationSet, odom: np.ndarray) -> ObservationSet:
+        """``obs`` without the points on another robot's body (``teammate_radius``)."""
+        cfg = self.cfg
+        if cfg.teammate_radius <= 0 or len(obs) == 0 or cfg.filter.observation_model != "stereo_point" \
+                or obs.robot in self.local:
+            return obs
+        me = self._pose_at(obs.robot, odom)
+        others = []
+        for other in self.robots:
+            if other == obs.robot or other in self.local or not self._odom[other]:
+                continue
+            buf = self._odom[other]
+            if obs.stamp_ns >= buf[-1][0]:
+                at = buf[-1][1]
+            else:
+                t = np.fromiter((st for st, _ in buf), float, len(buf))
+                at = interpolate_poses(np.array([float(obs.stamp_ns)]), t, np.array([q for _, q in buf]))[0]
+            pose = self._pose_at(other, at)
+            if pose is not None:
+                others.append(pose[:2])
+        if me is None or not others:
+            return obs
+        xy = transform_points(me, obs.z[:, :2])
+        d = np.linalg.norm(xy[:, None] - np.array(others)[None], axis=2).min(axis=1)
+        body = (d < cfg.teammate_radius) & (obs.z[:, 2] < cfg.teammate_height)
+        if not body.any():
+            return obs
+        self.drops["on_teammate"] += int(body.sum())
+        keep = ~body
+        return ObservationSet(obs.robot, obs.stamp_ns, obs.z[keep], obs.cov[keep], obs.descriptors[keep],
+                              obs.track_ids[keep])
 
     def _path_length(self, robot: str, t0: int, t1: int) -> float:
         """Distance the odometry of ``robot`` covered between stamps ``t0`` and ``t1`` [m]."""

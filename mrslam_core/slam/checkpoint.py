@@ -34,6 +34,7 @@ from mrslam_core.slam.config import FilterConfig
 from mrslam_core.slam.filter import MultiRobotFastSLAM
 from mrslam_core.slam.landmarks import LandmarkStore
 from mrslam_core.slam.models import ObservationModel
+from mrslam_core.slam.tracks import TrackMemory
 
 FORMAT = "mrslam-filter-checkpoint"
 FORMAT_VERSION = 1
@@ -50,8 +51,11 @@ STORE_ARRAYS = ("table",) + POOL_ARRAYS + ("descriptor", "ref", "origin")
 #: the header's ``attributes``, arrays as ``attr.<name>``, ``{int: array}`` dicts as
 #: ``dict.<name>.keys``/``.values``; an attribute of another type makes saving fail loudly.
 FILTER_ATTRIBUTES = frozenset(
-    FILTER_ARRAYS + ("config", "robots", "index", "model", "rng", "landmarks", "last_stamp", "dropped")
+    FILTER_ARRAYS + ("config", "robots", "index", "model", "rng", "landmarks", "last_stamp", "dropped", "tracks")
 )
+#: Arrays of each robot's :class:`~mrslam_core.slam.tracks.TrackMemory`, saved as
+#: ``tracks.<k>.<name>`` (k: the robot's index); its set counter is in the header.
+TRACK_ARRAYS = ("ids", "slots", "last")
 #: Store attributes restored or rebuilt (``_tree``/``_dtree`` and their live lists are caches,
 #: rebuilt lazily from ``ref`` and ``descriptor``).
 STORE_ATTRIBUTES = frozenset(
@@ -100,6 +104,9 @@ def save_checkpoint(filter: MultiRobotFastSLAM, path: str | Path, extra: dict[st
         value = np.asarray(getattr(store, name))
         arrays[f"store.{name}"] = value[:pool] if name in POOL_ARRAYS else value
     attributes = _other_state(filter, arrays)
+    for k, memory in filter.tracks.items():
+        for name in TRACK_ARRAYS:
+            arrays[f"tracks.{k}.{name}"] = getattr(memory, name)
     extra_json: dict[str, Any] = {}
     for key, value in (extra or {}).items():
         if not isinstance(key, str):
@@ -120,6 +127,7 @@ def save_checkpoint(filter: MultiRobotFastSLAM, path: str | Path, extra: dict[st
         "last_stamp_ns": {name: int(t) for name, t in filter.last_stamp.items()},
         "dropped": {str(k): int(v) for k, v in filter.dropped.items()},
         "attributes": attributes,
+        "tracks": {str(k): memory.sets for k, memory in filter.tracks.items()},
         "rng": filter.rng.bit_generator.state,
         "store": {"dim": int(store.dim), "chunk": int(store.chunk),
                   "descriptor_dim": int(store.descriptor_dim), "size": int(store.size)},
@@ -296,6 +304,14 @@ def _rebuild(path, header, arrays, config, model) -> tuple[MultiRobotFastSLAM, d
     slam.last_stamp = {str(r): int(t) for r, t in header["last_stamp_ns"].items()}
     slam.dropped = Counter({str(r): int(n) for r, n in header["dropped"].items()})
     _restore_other_state(path, slam, header["attributes"], arrays)
+    for key, sets in header.get("tracks", {}).items():
+        memory = TrackMemory(m, config.association.track_memory)
+        for name in TRACK_ARRAYS:
+            setattr(memory, name, np.array(arrays[f"tracks.{key}.{name}"], np.int64))
+        if memory.slots.shape != (m, memory.ids.size) or memory.last.shape != memory.ids.shape:
+            raise CheckpointError(f"{path}: tracks.{key} arrays do not match {m} particles")
+        memory.sets = int(sets)
+        slam.tracks[int(key)] = memory
     state = header["rng"]
     bit_gen = getattr(np.random, str(state["bit_generator"]), None)
     if not (isinstance(bit_gen, type) and issubclass(bit_gen, np.random.BitGenerator)):

@@ -69,6 +69,14 @@ class AssociationConfig:
     rejection of ORB-SLAM's pose optimisation). An outlier neither moves the pose, nor updates
     the landmark, nor starts a new one; its weight factor is p0, as for an unexplained
     observation.
+    ``track_gate`` (DT >= D0, or 0 = off; ``ml`` mode): an observation whose frontend track id
+    was associated with a landmark (or started one) in a particle at one of that robot's last
+    ``track_memory`` sets is associated with that landmark again in that particle whenever its
+    Mahalanobis distance (motion noise included) is within DT, before any other candidate. The
+    frontend follows a track by appearance from image to image, so it stays with its point when
+    an odometry step is 3σ off and the map, projected through the predicted pose, falls outside
+    D0 for every observation (the robot would then map the whole set again, at the wrong pose);
+    the proposal then corrects the pose from those pairs. Track ids are per robot.
     """
 
     mode: Literal["ml", "hungarian"] = "ml"
@@ -83,6 +91,8 @@ class AssociationConfig:
     geometry_weight: float = 1.0
     outlier_gate: float = 0.0
     outlier_rounds: int = 3
+    track_gate: float = 0.0
+    track_memory: int = 10
 
     def __post_init__(self) -> None:
         if self.mahalanobis_gate <= 0 or self.descriptor_gate < 0:
@@ -91,6 +101,8 @@ class AssociationConfig:
             raise ValueError("max_candidates must be >= 1")
         if self.outlier_gate < 0 or self.outlier_rounds < 1:
             raise ValueError("outlier_gate must be >= 0 and outlier_rounds >= 1")
+        if self.track_gate < 0 or self.track_memory < 1:
+            raise ValueError("track_gate must be >= 0 and track_memory >= 1")
 
 
 @dataclass(frozen=True)

@@ -35,6 +35,7 @@ from mrslam_core.slam.resampling import (
     low_variance_indices,
     normalise_log_weights,
 )
+from mrslam_core.slam.tracks import TrackMemory
 from mrslam_core.types import ObservationSet, RobotSighting
 
 LOG_2PI = float(np.log(2.0 * np.pi))
@@ -150,6 +151,8 @@ class MultiRobotFastSLAM:
         #: per robot index: motion noise (3, 3), map frame, accumulated but not yet sampled
         #: (``defer_motion_noise``); missing = none.
         self.pending_cov: dict[int, np.ndarray] = {}
+        #: per robot index, the landmark its recent frontend tracks went to (``track_gate``)
+        self.tracks: dict[int, TrackMemory] = {}
         self._noise_drawn = True
 
     # ------------------------------------------------------------------ public API
@@ -360,6 +363,11 @@ class MultiRobotFastSLAM:
             cand = store.candidates(world, 4 * cfg.max_candidates, radius)  # (B, 4C), nearest first
         cand, e = self._descriptor_filter(cand, desc)
         cand, e = cand[:, : cfg.max_candidates], e[:, : cfg.max_candidates]
+        memory = None
+        if cfg.track_gate > 0 and cfg.mode == "ml":
+            memory = self.tracks.setdefault(k, TrackMemory(m, cfg.track_memory))
+            track_slot = memory.lookup(tracks)  # (M, B)
+            cand, e = self._with_track_candidates(cand, e, desc, track_slot)
         pair = np.full((m, b), -1, np.int64)
         vb, vc = np.nonzero(cand >= 0)  # the V (observation, candidate) pairs worth scoring
         vslots = cand[vb, vc]
@@ -380,6 +388,9 @@ class MultiRobotFastSLAM:
                 if cfg.descriptor_trust_gate > cfg.mahalanobis_gate:
                     trusted = held & ~feasible & (maha <= cfg.descriptor_trust_gate)
                     cost = np.where(trusted, 1e6 + maha, cost)  # only where nothing passes D0
+                if memory is not None:
+                    same = (vslots[None] == track_slot[:, vb]) & held & (maha <= cfg.track_gate)
+                    cost = np.where(same, -1.0, cost)  # a continuing track keeps its landmark
                 pair = associate_ml(cost, vb, vc, b, cand.shape[1])
                 if np.unique(vslots).size < vslots.size:  # else no two observations share a slot
                     pair, n = resolve_conflicts(pair, vslots, cost)
@@ -434,8 +445,38 @@ class MultiRobotFastSLAM:
             self._update_existence(poses, mean_pose, radius, mi, vslots[pair[mi, bi]] if mi.size else mi)
 
         log_l += (~assoc * log_p0[None]).sum(axis=1)
-        created = self._create(poses, z, r, desc, tracks, ~assoc & ~rejected)
+        created, new_slots = self._create(poses, z, r, desc, tracks, ~assoc & ~rejected)
+        if memory is not None:
+            kept = np.full((m, b), -1, np.int64)
+            if mi.size:
+                kept[mi, bi] = slots
+            memory.record(tracks, np.where(kept >= 0, kept, new_slots))
         return int(assoc.sum()), created
+
+    def _with_track_candidates(
+        self, cand: np.ndarray, e: np.ndarray, desc: np.ndarray, track_slot: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Add to each observation's candidates (B, C) the two slots its track went to in most
+        particles (``track_slot`` (M, B), −1: none), whatever their distance or descriptor;
+        returns (cand, E) of width C + 2 (−1 / unused where there are fewer)."""
+        b = cand.shape[0]
+        extra = np.full((b, 2), -1, np.int64)
+        for j in np.flatnonzero((track_slot >= 0).any(axis=0)):
+            values, counts = np.unique(track_slot[:, j], return_counts=True)
+            counts[values < 0] = 0
+            top = values[np.argsort(-counts, kind="stable")[:2]]
+            top = top[top >= 0]
+            extra[j, : top.size] = top
+        if not (extra >= 0).any():
+            return cand, e
+        dup = (cand[:, :, None] == extra[:, None, :]) & (extra[:, None, :] >= 0)
+        cand = np.where(dup.any(axis=2), -1, cand)
+        valid = extra >= 0
+        if desc.shape[1]:
+            e_extra = ((desc[:, None, :] - self.landmarks.descriptor[np.where(valid, extra, 0)]) ** 2).sum(-1)
+        else:
+            e_extra = np.zeros(extra.shape)
+        return np.concatenate([extra, cand], axis=1), np.concatenate([np.where(valid, e_extra, 0.0), e], axis=1)
 
     def _sample_proposal(
         self, k: int, mi: np.ndarray, z: np.ndarray, r: np.ndarray, mu: np.ndarray,
@@ -695,12 +736,16 @@ class MultiRobotFastSLAM:
     def _create(
         self, poses: np.ndarray, z: np.ndarray, r: np.ndarray, desc: np.ndarray, tracks: np.ndarray,
         new: np.ndarray,
-    ) -> int:
-        """New landmarks for observations that were not associated: one slot per observation."""
+    ) -> tuple[int, np.ndarray]:
+        """New landmarks for observations that were not associated: one slot per observation.
+
+        Returns: the number of slots started, and (M, B) the slot each particle started for each
+        observation (−1: none)."""
         store = self.landmarks
         cols = np.flatnonzero(new.any(axis=0))
+        started = np.full(new.shape, -1, np.int64)
         if cols.size == 0:
-            return 0
+            return 0, started
         slots = store.allocate(cols.size, desc[cols])
         store.origin[slots] = tracks[cols]
         mi, j = np.nonzero(new[:, cols])
@@ -708,7 +753,8 @@ class MultiRobotFastSLAM:
         lm, cov = self.model.new_landmark(poses[mi], z[bi], r[bi])
         store.write(mi, slots[j], mean=lm, cov=cov, exists=True, count=1, score=1)
         store.set_reference(slots[j], lm)
-        return int(cols.size)
+        started[mi, bi] = slots[j]
+        return int(cols.size), started
 
     def _observe_robot(self, k: int, sighting: RobotSighting, log_l: np.ndarray) -> None:
         """Score a range-bearing sighting of another robot in every particle."""
@@ -747,8 +793,12 @@ class MultiRobotFastSLAM:
         self.poses[dst] = self.poses[src]
         self.score[dst] = self.score[src]
         self.landmarks.copy_rows(dst, src)
+        for memory in self.tracks.values():
+            memory.copy_rows(dst, src)
         if self.resamples % 8 == 0 and self.landmarks.dead_fraction() > 0.5:
-            self.landmarks.compact()
+            remap = self.landmarks.compact()
+            for memory in self.tracks.values():
+                memory.remap(remap)
         self.log_w = np.full(self.num_particles, -np.log(self.num_particles))
         self.resamples += 1
 
@@ -785,6 +835,7 @@ class MultiRobotFastSLAM:
             self.index[name] = k
             self.poses = np.concatenate([self.poses, poses[:, None]], axis=1)
         self.last_stamp.pop(name, None)
+        self.tracks.pop(k, None)
         if stamp_ns is not None:
             self.last_stamp[name] = int(stamp_ns)
         for store, cov in ((self.drift_cov, drift_cov), (self.pending_cov, pending_cov)):
@@ -810,6 +861,8 @@ class MultiRobotFastSLAM:
         self.poses = self.poses[index]
         self.score = self.score[index] if score is None else np.array(score, dtype=float)
         self.landmarks.copy_rows(np.arange(m), index)
+        for memory in self.tracks.values():
+            memory.slots = memory.slots[index]
         self.log_w = np.full(m, -np.log(m))
 
     def insert_landmarks(

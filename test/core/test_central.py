@@ -417,3 +417,30 @@ def test_a_restarted_robot_not_merged_at_the_checkpoint_maps_on_its_own_after_re
     assert "robot2" in m.local
     resumed = CentralMapper.resume(m.cfg, m.save(tmp_path / "c.npz"))
     assert "robot2" in resumed.local and resumed.restarts == m.restarts
+
+
+def _teammate_run(radius: float) -> tuple[CentralMapper, int]:
+    """robot1 (0.5 t, 0) and robot2 (0.5 t, 1) drive side by side; at 0.4 s robot1 sees a point
+    on robot2's body, one above it (a wall behind) and one 2 m ahead; slots the set started."""
+    m = CentralMapper(_cfg(teammate_radius=radius))
+    _odom(m, "robot1", 2)
+    _odom(m, "robot2", 2)
+    m.add_observations(_obs("robot1", 0.2))
+    m.add_observations(_obs("robot2", 0.2))
+    m.process()
+    before = m.slam.landmarks.size
+    z = np.array([[0.02, 0.95, 0.3], [0.0, 1.0, 1.5], [2.0, -0.5, 0.3]])
+    m.add_observations(ObservationSet("robot1", int(0.4 * S), z, np.tile(np.eye(3) * 0.01, (3, 1, 1))))
+    m.add_observations(_obs("robot2", 0.4))
+    done = m.process(flush=True)
+    assert ("robot1", 0.4) in _order(done)
+    return m, m.slam.landmarks.size - before - 3  # robot2's set at 0.4 starts 3 slots
+
+
+def test_points_on_a_teammates_body_are_left_out_and_counted():
+    m, started = _teammate_run(radius=0.4)
+    assert m.drops["on_teammate"] == 1
+    assert started == 2
+    m, started = _teammate_run(radius=0.0)
+    assert m.drops["on_teammate"] == 0
+    assert started == 3

@@ -62,7 +62,7 @@ def _with_sightings(updates, step):
     return [replace(updates[0], sightings=[s])] + list(updates[1:])
 
 
-@pytest.mark.parametrize("proposal", ["fastslam1", "fastslam2", "fastslam2+relocalization"])
+@pytest.mark.parametrize("proposal", ["fastslam1", "fastslam2", "fastslam2+relocalization", "fastslam2+tracks"])
 def test_reloaded_filter_continues_bit_for_bit(tmp_path, proposal):
     cfg = FilterConfig(
         num_particles=25, seed=3, proposal=proposal.split("+")[0], resample_threshold=0.9,
@@ -74,6 +74,8 @@ def test_reloaded_filter_continues_bit_for_bit(tmp_path, proposal):
         if not hasattr(config, "RelocalizationConfig"):
             pytest.skip("this filter has no relocalization")
         cfg = replace(cfg, relocalization=config.RelocalizationConfig(enabled=True))
+    if proposal.endswith("tracks"):  # per-robot track memories (the synthetic sets carry track ids)
+        cfg = replace(cfg, association=replace(cfg.association, track_gate=30.0))
     world = SyntheticWorld(WORLD)
     data = [_with_sightings(ups, i) for i, (_, _, _, ups) in enumerate(world.run(24))]
     slam = MultiRobotFastSLAM(cfg, world.robots, world.start_poses())
@@ -88,6 +90,11 @@ def test_reloaded_filter_continues_bit_for_bit(tmp_path, proposal):
     np.testing.assert_array_equal(extra["odom"], np.arange(6.0).reshape(2, 3))
     assert copy.config == cfg and copy.robots == slam.robots
     assert_same_state(slam, copy)
+    assert set(slam.tracks) == ({0, 1} if proposal.endswith("tracks") else set())
+    for k, memory in slam.tracks.items():
+        assert memory.ids.size > 0 and memory.sets == copy.tracks[k].sets
+        for name in ("ids", "slots", "last"):
+            np.testing.assert_array_equal(getattr(memory, name), getattr(copy.tracks[k], name))
     for ups in data[12:]:
         ra, rb = slam.step(ups), copy.step(ups)
         assert ra == rb

@@ -278,3 +278,35 @@ def test_robots_stand_still_at_the_start_for_start_delay():
     assert all(c == (0.0, 0.0) for c in cmds[:5]), cmds
     assert cmds[5][0] > 0.1 and cmds[6][0] > 0.1, cmds
     assert ex.goals["r"] is not None  # the goal was planned while it waited
+
+
+def test_a_cost_on_unseen_cells_keeps_the_path_in_seen_space():
+    # from (5, 0) to (5, 10): the straight row 5 is unseen from column 2 to 8; rows 0-1 are seen
+    passable = np.ones((11, 11), bool)
+    seen = np.zeros((11, 11), bool)
+    seen[:2] = True
+    seen[:, :2] = True
+    seen[:, 9:] = True
+    straight = astar(passable, (5, 0), (5, 10))
+    assert len(straight) == 11 and all(r == 5 for r, _ in straight)
+    detour = astar(passable, (5, 0), (5, 10), np.where(seen, 1.0, 3.0))
+    assert len(detour) == 15 and not any(not seen[c] for c in detour)  # 3 + 7 + 3 steps around
+    # a cost of 1.5: 7 unseen cells (10.5) are cheaper than the 14 steps of the detour
+    assert astar(passable, (5, 0), (5, 10), np.where(seen, 1.0, 1.5)) == straight
+    with pytest.raises(ValueError):
+        ExplorationConfig(unknown_cost=0.5)
+
+
+@pytest.mark.parametrize("avoid_others", [False, True])
+def test_a_robot_is_not_sent_to_the_unseen_ground_around_a_teammate(avoid_others):
+    """robot2 stands 0.5 m before the frontier along x = 4 m, straight ahead of robot1. Without
+    ``avoid_others`` robot1 is sent to the frontier just behind robot2 (the shortest way); with
+    it, to a part of the frontier at least ``min_target_distance`` (1 m) from robot2."""
+    from mrslam_core.exploration.explorer import Explorer
+
+    grid = _open_room()
+    ex = Explorer(ExplorationConfig(robot_radius=0.2, avoid_others=avoid_others), ["robot1", "robot2"])
+    poses = {"robot1": np.array([0.5, 2.0, 0.0]), "robot2": np.array([3.5, 2.0, 0.0])}
+    ex.step(grid, poses, 0.0)
+    d = float(np.linalg.norm(ex.goals["robot1"].target - poses["robot2"][:2]))
+    assert (d >= 1.0) == avoid_others, d
