@@ -458,7 +458,9 @@ class MultiRobotFastSLAM:
     ) -> tuple[np.ndarray, np.ndarray]:
         """Add to each observation's candidates (B, C) the two slots its track went to in most
         particles (``track_slot`` (M, B), −1: none), whatever their distance or descriptor;
-        returns (cand, E) of width C + 2 (−1 / unused where there are fewer)."""
+        returns (cand, E) of width C + 2 (−1 / unused where there are fewer). In a particle whose
+        own memory names another slot (or none) they are scored like any candidate, by E and D,
+        without the E0 cut of :meth:`_descriptor_filter` (the track says they are the point)."""
         b = cand.shape[0]
         extra = np.full((b, 2), -1, np.int64)
         for j in np.flatnonzero((track_slot >= 0).any(axis=0)):
