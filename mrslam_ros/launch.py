@@ -320,6 +320,9 @@ def main(argv: list[str]) -> int:
             print(" ".join(launcher.command(spec)))
         launcher.stop()
         return 0
+    # a launcher started with SIGINT ignored (a background job of a non-interactive shell passes
+    # SIG_IGN on, and Python then installs no handler) would sit through Ctrl-C
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     previous = signal.signal(signal.SIGTERM, _raise_stop)
     interrupted = False
     failed: list[str] = []

@@ -93,13 +93,17 @@ def test_failing_node_stops_the_others(tmp_path):
     assert "interrupted" in (tmp_path / "logs" / "robot2_listener.log").read_text()
 
 
-def test_cli_ctrl_c_stops_every_node(tmp_path):
+@pytest.mark.parametrize("sigint_ignored", [False, True])
+def test_cli_ctrl_c_stops_every_node(tmp_path, sigint_ignored):
+    # sigint_ignored: started as a background job of a non-interactive shell (`cmd &`), which
+    # passes SIGINT on ignored
     cfg = tmp_path / "launch.yaml"
     cfg.write_text(yaml.safe_dump({"stop_timeout": 2.0, "nodes": [
         {"module": "launch_dummy", "name": "a", "namespace": "robot1"},
         {"module": "launch_dummy", "name": "b", "namespace": "robot2"}]}))
+    ignore = (lambda: signal.signal(signal.SIGINT, signal.SIG_IGN)) if sigint_ignored else None
     proc = subprocess.Popen([sys.executable, "-m", "mrslam_ros.cli", "launch", str(cfg)],
-                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, preexec_fn=ignore)
     lines: list[str] = []
     end = time.monotonic() + 30
     while time.monotonic() < end and len(_pids("".join(lines))) < 2:
