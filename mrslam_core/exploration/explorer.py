@@ -146,12 +146,11 @@ class Explorer:
         cells = np.clip(cells, 0, np.array(grid.shape) - 1)
         cost = travel_cost(prob, cells, cfg.occ_max, grid.res)[:, targets[:, 0], targets[:, 1]]
         txy = grid.centre_of(targets)
-        far_cost = cost.copy()
-        for i, name in enumerate(self.robots):
-            far_cost[i, np.linalg.norm(txy - poses[name][:2], axis=1) < cfg.min_target_distance] = np.inf
-        if cfg.avoid_others:
-            for name in self.robots:  # the unseen ground around a robot: another one would drive into it
-                far_cost[:, np.linalg.norm(txy - poses[name][:2], axis=1) < cfg.min_target_distance] = np.inf
+        robot_xy = np.array([poses[n][:2] for n in self.robots])
+        near = np.linalg.norm(txy[None] - robot_xy[:, None], axis=2) < cfg.min_target_distance  # (R, T)
+        if cfg.avoid_others:  # the unseen ground around any robot: another one would drive into it
+            near = np.broadcast_to(near.any(axis=0), near.shape)
+        far_cost = np.where(near, np.inf, cost)
         chosen = assign_targets(txy, far_cost, cfg.beta, cfg.utility_range, cfg.coordinated)
         for i in np.flatnonzero(chosen < 0):  # only near frontiers left: turn and look at them
             if np.isfinite(cost[i]).any():
