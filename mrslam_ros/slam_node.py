@@ -20,6 +20,7 @@ shuts down.
 from __future__ import annotations
 
 import json
+import math
 import re
 import sys
 import threading
@@ -251,7 +252,11 @@ class SlamNode(Node):
                 self.get_logger().info(f"{m['robot']} not merged yet: {m['reason']}", throttle_duration_sec=10.0)
         self._merges_logged = len(self.mapper.merges)
         for e in self.mapper.relocalizations[self._relocs_logged:]:
-            if e["accepted"]:
+            if e["cause"] == "map_check":
+                self.get_logger().warning(f"{e['robot']} disagreed with the older map twice: moved by "
+                                          f"{e['shift_m']:.2f} m, {math.degrees(e['turn_rad']):.1f} deg "
+                                          f"({e['inliers']} inliers)")
+            elif e["accepted"]:
                 self.get_logger().info(f"{e['robot']} back after {e['gap_s']:.1f} s: re-localised on the map "
                                        f"({e['inliers']} inliers, {e['shift_m']:.2f} m from dead reckoning)")
             else:
@@ -324,6 +329,7 @@ class SlamNode(Node):
             "queued_at_end": self.mapper.queued,
             "merges": self.mapper.merges,
             "relocalizations": self.mapper.relocalizations,
+            "map_checks": dict(self.mapper.map_checks),
             "restarts": self.mapper.restarts,
             "outlier_matches": self.mapper.slam.outlier_pairs / self.mapper.slam.num_particles,
             "unmerged": sorted(self.mapper.local),

@@ -20,7 +20,7 @@ import heapq
 import time
 from pathlib import Path
 from collections import Counter, deque
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -35,6 +35,46 @@ from mrslam_core.types import ObservationSet
 #: translation [m] and rotation [rad] an odometry pose may jump beyond odom_reset_speed and
 #: odom_reset_turn_rate times the time since the previous pose (stamp jitter, message bursts)
 ODOM_RESET_FLOOR = (0.1, 0.2)
+
+
+@dataclass(frozen=True)
+class MapCheckConfig:
+    """Checking each robot against the older map while it drives (a robot that lost its heading).
+
+    Every ``every`` seconds of a robot's sets, its sets of the last ``window`` seconds, moved into
+    its current base_link by its odometry (one point per frontend track), are aligned to the best
+    particle's landmarks that are older than ``age`` (descriptor matches, RANSAC and least
+    squares, the ``fusion`` thresholds but ``min_inliers``). Landmarks the robot mapped since it
+    went wrong are younger and left out, so the fit shows where the older map puts the robot. If
+    the fit is more than ``shift`` or ``turn`` away from the robot's estimate (and within
+    ``max_shift`` and ``max_turn``: no jump across the building), the robot's pose is drawn again in
+    every particle from the fit. A robot whose wheels slipped while it saw nothing comes back
+    several degrees off, and then maps a corridor mapped before as a new one, turned: no
+    association gate reaches landmarks 0.3 m away, while descriptors do.
+
+    Attributes:
+        every: seconds of a robot's sets between checks; 0: off [s].
+        window: seconds of the robot's recent sets aligned together [s].
+        age: only landmarks created at least this long before the check take part [s].
+        min_inliers: fewest RANSAC inliers of a fit that may move the robot.
+        shift: a fit closer than this to the estimate, and within ``turn``, agrees with it [m].
+        turn: see ``shift`` [rad].
+        max_shift: a fit further than this from the estimate is not used [m].
+        max_turn: a fit turned more than this from the estimate is not used [rad].
+        sigma_xy: standard deviation added to the fit's own, per axis, when the poses are drawn [m].
+        sigma_theta: the same for the heading [rad].
+    """
+
+    every: float = 1.0
+    window: float = 2.0
+    age: float = 10.0
+    min_inliers: int = 10
+    shift: float = 0.3
+    turn: float = 0.087
+    max_shift: float = 1.0
+    max_turn: float = 0.5
+    sigma_xy: float = 0.03
+    sigma_theta: float = 0.015
 
 
 @dataclass(frozen=True)
@@ -89,6 +129,7 @@ class CentralConfig:
             away with it and pull whoever associates them. Covers the body and the pose's
             uncertainty (a P3-DX's rear corner is 0.33 m from the axle); 0: off [m].
         teammate_height: top of the robots' bodies and sensor heads above the floor [m].
+        map_check: checking each robot against the older map while it drives.
         filter: the multi-robot filter (and each unknown-start robot's local filter).
         fusion: map alignment and joining of unknown-start robots.
     """
@@ -111,6 +152,7 @@ class CentralConfig:
     odom_reset_turn_rate: float = 6.0
     teammate_radius: float = 0.0
     teammate_height: float = 0.6
+    map_check: MapCheckConfig = field(default_factory=MapCheckConfig)
     filter: FilterConfig = field(default_factory=FilterConfig)
     fusion: FusionConfig = field(default_factory=FusionConfig)
 
@@ -166,8 +208,16 @@ class CentralMapper:
         self._local_updates: Counter[str] = Counter()
         #: every alignment attempt: robot, stamp_ns, accepted, reason, inliers, rmse_m, transform
         self.merges: list[dict] = []
-        #: every re-localisation after a gap: robot, stamp_ns, gap_s, accepted, reason, inliers, shift_m
+        #: every re-localisation after a gap (cause "gap": robot, stamp_ns, gap_s, accepted, reason,
+        #: inliers, shift_m) and every move by a map check (cause "map_check": also turn_rad)
         self.relocalizations: list[dict] = []
+        #: map checks made, by outcome (see :class:`MapCheckConfig`)
+        self.map_checks: Counter[str] = Counter()
+        #: each robot's recent sets for the map check: (stamp_ns, odometry pose (3,), set)
+        self._recent: dict[str, deque[tuple[int, np.ndarray, ObservationSet]]] = {r: deque() for r in robots}
+        self._checked: dict[str, int] = {}
+        #: each robot's last disagreeing fit, waiting for the next check: (stamp_ns, odometry, fit (3,))
+        self._pending: dict[str, tuple[int, np.ndarray, np.ndarray]] = {}
         #: every odometry reset (a restarted robot): robot, stamp_ns, jump_m, turn_rad
         self.restarts: list[dict] = []
         self.drops: Counter[str] = Counter()
@@ -224,8 +274,9 @@ class CentralMapper:
         self.restarts.append({"robot": robot, "stamp_ns": stamp_ns, "jump_m": jump, "turn_rad": turn})
         self.drops["odometry_reset"] += 1
         self._odom[robot].clear()
-        for state in (self._last, self._returning, self._reloc_tried, self._sighted):
+        for state in (self._last, self._returning, self._reloc_tried, self._sighted, self._checked, self._pending):
             state.pop(robot, None)
+        self._recent[robot].clear()
         self.local[robot] = self._local_filter(robot)
         self._local_updates[robot] = 0
 
@@ -356,6 +407,8 @@ class CentralMapper:
         except FilterInputError:
             self.drops["bad_observations"] += 1
             return None
+        if filt is self.slam and not held:
+            self._check_map(obs, odom)
         ms = (time.perf_counter() - t0) * 1e3
         self.update_ms.append(ms)
         self._last[obs.robot] = (obs.stamp_ns, odom)
@@ -426,8 +479,8 @@ class CentralMapper:
 
         slam, k = self.slam, self.slam.index[obs.robot]
         dead = compose(slam.estimate().mean[k], motion)
-        entry = {"robot": obs.robot, "stamp_ns": int(obs.stamp_ns), "gap_s": gap, "travelled_m": travelled,
-                 "accepted": False}
+        entry = {"robot": obs.robot, "stamp_ns": int(obs.stamp_ns), "cause": "gap", "gap_s": gap,
+                 "travelled_m": travelled, "accepted": False}
         self.relocalizations.append(entry)
         limit = self.cfg.relocalize_gate + self.cfg.relocalize_drift * travelled
         try:
@@ -448,13 +501,105 @@ class CentralMapper:
         if shift > limit:
             entry["reason"] = f"the fit is {shift:.2f} m from the dead-reckoned pose (gate {limit:.2f} m)"
             return False
-        cov = np.nan_to_num(al.cov) + np.diag([0.02**2, 0.02**2, 0.01**2])  # a floor for a fit of few points
-        chol = np.linalg.cholesky(0.5 * (cov + cov.T))
-        draws = al.transform + (chol @ slam.rng.standard_normal((slam.num_particles, 3, 1)))[..., 0]
-        draws[:, 2] = wrap_angle(draws[:, 2])
-        slam.add_robot(obs.robot, draws)
+        self._redraw(obs.robot, al.transform, al.cov, (0.02, 0.01))  # a floor for a fit of few points
         entry["accepted"] = True
         return True
+
+    def _check_map(self, obs: ObservationSet, odom: np.ndarray) -> None:
+        """Keep ``obs`` (taken at odometry pose ``odom``) among its robot's recent sets and, when
+        due, align those sets to the older map and move the robot if the map disagrees
+        (:class:`MapCheckConfig`)."""
+        mc = self.cfg.map_check
+        if mc.every <= 0 or self.cfg.filter.observation_model != "stereo_point":
+            return
+        recent = self._recent[obs.robot]
+        if len(obs):
+            recent.append((int(obs.stamp_ns), odom, obs))
+        while recent and recent[0][0] < obs.stamp_ns - mc.window * 1e9:
+            recent.popleft()
+        if obs.stamp_ns - self._checked.get(obs.robot, -(1 << 62)) < mc.every * 1e9:
+            return
+        self._checked[obs.robot] = int(obs.stamp_ns)
+        from mrslam_core.fusion.alignment import ransac_align
+        from mrslam_core.fusion.maps import FusionError, LandmarkMap
+
+        slam, k = self.slam, self.slam.index[obs.robot]
+        est = slam.estimate().mean[k]
+        frame = self._recent_frame(obs.robot, odom)
+        if frame is None or len(frame.means) < mc.min_inliers:
+            self.map_checks["too_few_points"] += 1
+            return
+        world = LandmarkMap.from_filter(slam)
+        reach = mc.max_shift + float(np.linalg.norm(frame.means[:, :2], axis=1).max()) + self.cfg.fusion.inlier_distance
+        born = slam.landmarks.born[world.ids]
+        near = np.linalg.norm(world.means[:, :2] - est[:2], axis=1) <= reach
+        world = world.subset(np.flatnonzero(near & (born < obs.stamp_ns - mc.age * 1e9)))
+        try:
+            al = ransac_align(world, frame, replace(self.cfg.fusion, min_inliers=mc.min_inliers))
+        except FusionError:
+            al = None
+        if al is None or not al.accepted:
+            self.map_checks["no_fit"] += 1
+            self._pending.pop(obs.robot, None)
+            return
+        shift = float(np.hypot(*(al.transform[:2] - est[:2])))
+        turn = float(wrap_angle(al.transform[2] - est[2]))
+        if shift <= mc.shift and abs(turn) <= mc.turn:
+            self.map_checks["agreed"] += 1
+            self._pending.pop(obs.robot, None)
+            return
+        if shift > mc.max_shift or abs(turn) > mc.max_turn:
+            self.map_checks["too_far"] += 1
+            return
+        # a fit of look-alikes disagrees once; the robot is moved when the next check's fit, from
+        # other sets, lands where the previous one said the robot would be by now
+        before = self._pending.get(obs.robot)
+        self._pending[obs.robot] = (int(obs.stamp_ns), odom, al.transform)
+        if before is None or obs.stamp_ns - before[0] > 1.5 * mc.every * 1e9:
+            self.map_checks["unconfirmed"] += 1
+            return
+        then = compose(before[2], between(before[1], odom))
+        if (np.hypot(*(then[:2] - al.transform[:2])) > mc.shift
+                or abs(float(wrap_angle(then[2] - al.transform[2]))) > mc.turn):
+            self.map_checks["unconfirmed"] += 1
+            return
+        del self._pending[obs.robot]
+        self.map_checks["moved"] += 1
+        self.relocalizations.append({"robot": obs.robot, "stamp_ns": int(obs.stamp_ns), "cause": "map_check",
+                                     "accepted": True, "reason": "", "inliers": int(len(al.inliers)),
+                                     "shift_m": shift, "turn_rad": turn,
+                                     "transform": [float(v) for v in al.transform]})
+        self._redraw(obs.robot, al.transform, al.cov, (mc.sigma_xy, mc.sigma_theta), int(obs.stamp_ns))
+
+    def _redraw(self, robot: str, fit: np.ndarray, cov: np.ndarray, floor: tuple[float, float],
+                stamp_ns: int | None = None) -> None:
+        """Draw ``robot``'s pose in every particle from N(fit (3,), cov (3, 3) + diag(floor)²),
+        floor = (σ_xy [m], σ_θ [rad]); ``stamp_ns``: the time of those poses (None: no history)."""
+        slam = self.slam
+        cov = np.nan_to_num(cov) + np.diag([floor[0] ** 2, floor[0] ** 2, floor[1] ** 2])
+        chol = np.linalg.cholesky(0.5 * (cov + cov.T))
+        draws = fit + (chol @ slam.rng.standard_normal((slam.num_particles, 3, 1)))[..., 0]
+        draws[:, 2] = wrap_angle(draws[:, 2])
+        slam.add_robot(robot, draws, stamp_ns=stamp_ns)
+
+    def _recent_frame(self, robot: str, odom: np.ndarray):
+        """The robot's recent sets as one :class:`LandmarkMap` in its base_link at odometry pose
+        ``odom``, newest observation of each frontend track only; None without points."""
+        from mrslam_core.fusion.maps import FusionError, LandmarkMap
+
+        parts, seen = [], set()
+        for _, at, o in reversed(self._recent[robot]):
+            fresh = np.array([t < 0 or t not in seen for t in o.track_ids.tolist()], bool)
+            seen.update(o.track_ids[fresh & (o.track_ids >= 0)].tolist())
+            if fresh.any():
+                try:
+                    parts.append(LandmarkMap(o.z[fresh], o.cov[fresh], o.descriptors[fresh]).transformed(between(odom, at)))
+                except FusionError:
+                    continue
+        if not parts:
+            return None
+        return LandmarkMap(np.concatenate([p.means for p in parts]), np.concatenate([p.covs for p in parts]),
+                           np.concatenate([p.descriptors for p in parts]))
 
     def _try_merge(self, robot: str, stamp_ns: int) -> None:
         from mrslam_core.fusion.join import try_join
@@ -495,7 +640,14 @@ class CentralMapper:
             "latest_obs": self._latest_obs, "sighted": self._sighted, "first_ns": self._first_ns, "now_ns": self.now_ns,
             "seq": self._seq, "drops": dict(self.drops), "unmerged": sorted(self.local), "restarts": self.restarts,
             "queue": [[o.robot, o.stamp_ns] for _, _, _, o in sorted(self._queue, key=lambda e: e[:3])],
+            "checked": self._checked, "map_checks": dict(self.map_checks),
+            "pending": {r: [s, *map(float, at), *map(float, fit)] for r, (s, at, fit) in self._pending.items()},
+            "recent": [[r, s, *map(float, at)] for r in self.robots for s, at, _ in self._recent[r]],
         }, "update_ms": np.asarray(self.update_ms, float)}
+        recent = [o for r in self.robots for _, _, o in self._recent[r]]
+        for i, o in enumerate(recent):
+            extra.update({f"recent_z_{i}": o.z, f"recent_cov_{i}": o.cov, f"recent_desc_{i}": o.descriptors,
+                          f"recent_tracks_{i}": o.track_ids})
         for i, (_, _, _, o) in enumerate(sorted(self._queue, key=lambda e: e[:3])):
             extra.update({f"queue_z_{i}": o.z, f"queue_cov_{i}": o.cov, f"queue_desc_{i}": o.descriptors,
                           f"queue_tracks_{i}": o.track_ids})
@@ -539,6 +691,14 @@ class CentralMapper:
             mapper.add_observations(ObservationSet(robot, int(stamp), extra[f"queue_z_{i}"], extra[f"queue_cov_{i}"],
                                                    extra[f"queue_desc_{i}"], extra[f"queue_tracks_{i}"]))
         mapper.now_ns, mapper._seq = int(state["now_ns"]), int(state["seq"])
+        mapper._checked = {r: int(v) for r, v in state.get("checked", {}).items()}
+        mapper.map_checks = Counter(state.get("map_checks", {}))
+        mapper._pending = {r: (int(v[0]), np.array(v[1:4], float), np.array(v[4:7], float))
+                           for r, v in state.get("pending", {}).items()}
+        for i, (robot, stamp, *at) in enumerate(state.get("recent", [])):
+            o = ObservationSet(robot, int(stamp), extra[f"recent_z_{i}"], extra[f"recent_cov_{i}"],
+                               extra[f"recent_desc_{i}"], extra[f"recent_tracks_{i}"])
+            mapper._recent[robot].append((int(stamp), np.array(at, float), o))
         return mapper
 
     def counters(self) -> dict[str, int]:

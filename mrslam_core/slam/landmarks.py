@@ -45,6 +45,7 @@ class LandmarkStore:
         descriptor: (cap, D) float32 per slot.
         ref: (cap, dim) reference position of each slot for the spatial index [m] (inf: none).
         origin: (cap,) track id of the observation that created each slot (-1: unknown).
+        born: (cap,) stamp of the update that created each slot [ns] (-1: unknown, e.g. a joined map).
         size: slots in use (0..size-1).
     """
 
@@ -66,6 +67,7 @@ class LandmarkStore:
         self.descriptor = np.zeros((cap, descriptor_dim), np.float32)
         self.ref = np.full((cap, dim), np.inf)
         self.origin = np.full(cap, -1, np.int64)
+        self.born = np.full(cap, -1, np.int64)
         self._tree: cKDTree | None = None
         self._live = np.zeros(0, np.int64)
         self._dtree: cKDTree | None = None
@@ -149,7 +151,9 @@ class LandmarkStore:
             ref[: self.ref.shape[0]] = self.ref
             origin = np.full(cap, -1, np.int64)
             origin[: self.origin.size] = self.origin
-            self.descriptor, self.ref, self.origin = desc, ref, origin
+            born = np.full(cap, -1, np.int64)
+            born[: self.born.size] = self.born
+            self.descriptor, self.ref, self.origin, self.born = desc, ref, origin, born
         cols_needed = -(-self.size // self.chunk)
         if cols_needed > self.columns:
             add = cols_needed - self.columns
@@ -330,6 +334,7 @@ class LandmarkStore:
         self.descriptor[: live.size] = self.descriptor[live]
         self.ref[: live.size] = self.ref[live]
         self.origin[: live.size] = self.origin[live]
+        self.born[: live.size] = self.born[live]
         self.ref[live.size : self.size] = np.inf
         self.size = live.size
         self._tree = None

@@ -444,3 +444,69 @@ def test_points_on_a_teammates_body_are_left_out_and_counted():
     m, started = _teammate_run(radius=0.0)
     assert m.drops["on_teammate"] == 0
     assert started == 3
+
+
+def _slip_cfg(**check) -> CentralConfig:
+    from mrslam_core.pipelines.central import MapCheckConfig
+    from mrslam_core.slam.config import AssociationConfig
+
+    return CentralConfig(robots=("robot1",), start_poses=(0.0, 0.0, 0.0), map_check=MapCheckConfig(**check),
+                         filter=FilterConfig(num_particles=50, seed=3, proposal="fastslam2",
+                                             association=AssociationConfig(descriptor_gate=0.25)))
+
+
+def _slip_feed(m: CentralMapper, t0: float, t1: float) -> list:
+    """robot1 drives 3 m along x mapping the landmarks ahead (exact odometry), then stands blind
+    from 10 to 12 s while it turns 0.15 rad (8.6°) that its odometry does not report (wheels
+    slipping against a door jamb), then sees the mapped landmarks again until 18 s: its sets
+    from ``t0`` to ``t1`` [s] go in; returns the updates made."""
+    pts, desc = _world()
+    done = []
+    for i, t in enumerate(np.arange(0.0, 18.01, 0.2)):
+        if not t0 - 1e-9 <= t <= t1 + 1e-9:
+            continue
+        x = min(0.3 * t, 3.0)
+        turn = float(np.clip((t - 10.0) / 2.0, 0.0, 1.0)) * 0.15
+        m.add_odometry("robot1", int(round(t * S)), np.array([x, 0.0, 0.0]))
+        if 10.0 < t < 12.0 - 1e-9:
+            m.add_observations(ObservationSet("robot1", int(round(t * S)), np.zeros((0, 3)), np.zeros((0, 3, 3)),
+                                              np.zeros((0, desc.shape[1]), np.float32)))
+        else:
+            m.add_observations(_seen("robot1", t, np.array([x, 0.0, turn]), pts, desc, i))
+        done += m.process()
+    return done + m.process(flush=True)
+
+
+def _slip_run(**check) -> tuple[CentralMapper, np.ndarray]:
+    m = CentralMapper(_slip_cfg(**check))
+    return m, _slip_feed(m, 0.0, 18.0)[-1].pose
+
+
+def test_a_robot_turned_while_blind_is_moved_back_by_the_older_map():
+    """The map check aligns the robot's last 2 s of sets to the landmarks older than 3 s: two
+    checks in a row put it 0.15 rad from its estimate, and it is moved there; without the check
+    the 8.6° stay (its sets miss every landmark and are mapped again, turned)."""
+    m, pose = _slip_run(every=1.0, age=3.0)
+    (e,) = m.relocalizations
+    assert e["cause"] == "map_check" and 12.0 < e["stamp_ns"] / S < 15.0 and abs(e["turn_rad"] - 0.15) < 0.02, e
+    assert m.map_checks["moved"] == 1 and m.map_checks["agreed"] >= 8, m.map_checks
+    assert np.hypot(*(pose[:2] - [3.0, 0.0])) < 0.03 and abs(pose[2] - 0.15) < 0.01, pose
+    m, pose = _slip_run(every=0.0)
+    assert m.relocalizations == [] and not m.map_checks and abs(pose[2] - 0.15) > 0.1, pose
+
+
+def test_a_mapper_resumed_between_two_map_checks_continues_exactly(tmp_path):
+    """Saved at 13.1 s, after the first check that disagreed and before the second: the recent
+    sets, the waiting fit and the check clock are in the checkpoint, so the resumed mapper moves
+    the robot at the same set, to the same poses."""
+    a = CentralMapper(_slip_cfg(every=1.0, age=3.0))
+    _slip_feed(a, 0.0, 13.1)
+    assert a.map_checks["unconfirmed"] >= 1 and not a.relocalizations
+    a.save(tmp_path / "ckpt.npz")
+    b = CentralMapper.resume(_slip_cfg(every=1.0, age=3.0), tmp_path / "ckpt.npz")
+    for m in (a, b):
+        _slip_feed(m, 13.3, 18.0)
+    assert a.relocalizations == b.relocalizations and len(a.relocalizations) == 1
+    ta, tb = a.trajectories()["robot1"], b.trajectories()["robot1"]
+    np.testing.assert_array_equal(ta[0], tb[0])
+    np.testing.assert_array_equal(ta[1], tb[1])
