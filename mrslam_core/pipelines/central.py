@@ -485,10 +485,7 @@ class CentralMapper:
         limit = self.cfg.relocalize_gate + self.cfg.relocalize_drift * travelled
         try:
             frame = LandmarkMap(obs.z, obs.cov, obs.descriptors)
-            world = LandmarkMap.from_filter(slam)
-            # only landmarks the robot can see from anywhere within the gate: fewer look-alikes
-            reach = limit + float(np.linalg.norm(obs.z[:, :2], axis=1).max()) + self.cfg.fusion.inlier_distance
-            world = world.subset(np.flatnonzero(np.linalg.norm(world.means[:, :2] - dead[:2], axis=1) <= reach))
+            world = self._map_near(dead, obs.z, limit)
             al = ransac_align(world, frame, self.cfg.fusion)
         except FusionError as exc:
             entry["reason"] = str(exc)
@@ -521,7 +518,7 @@ class CentralMapper:
             return
         self._checked[obs.robot] = int(obs.stamp_ns)
         from mrslam_core.fusion.alignment import ransac_align
-        from mrslam_core.fusion.maps import FusionError, LandmarkMap
+        from mrslam_core.fusion.maps import FusionError
 
         slam, k = self.slam, self.slam.index[obs.robot]
         est = slam.estimate().mean[k]
@@ -529,11 +526,7 @@ class CentralMapper:
         if frame is None or len(frame.means) < mc.min_inliers:
             self.map_checks["too_few_points"] += 1
             return
-        world = LandmarkMap.from_filter(slam)
-        reach = mc.max_shift + float(np.linalg.norm(frame.means[:, :2], axis=1).max()) + self.cfg.fusion.inlier_distance
-        born = slam.landmarks.born[world.ids]
-        near = np.linalg.norm(world.means[:, :2] - est[:2], axis=1) <= reach
-        world = world.subset(np.flatnonzero(near & (born < obs.stamp_ns - mc.age * 1e9)))
+        world = self._map_near(est, frame.means, mc.max_shift, obs.stamp_ns - mc.age * 1e9)
         try:
             al = ransac_align(world, frame, replace(self.cfg.fusion, min_inliers=mc.min_inliers))
         except FusionError:
@@ -570,6 +563,19 @@ class CentralMapper:
                                      "shift_m": shift, "turn_rad": turn,
                                      "transform": [float(v) for v in al.transform]})
         self._redraw(obs.robot, al.transform, al.cov, (mc.sigma_xy, mc.sigma_theta), int(obs.stamp_ns))
+
+    def _map_near(self, pose: np.ndarray, points: np.ndarray, margin: float, born_before: float | None = None):
+        """The best particle's landmarks (a :class:`LandmarkMap`, map frame) that ``points`` (N, ≥2),
+        seen from base_link, can be matched to from anywhere within ``margin`` [m] of ``pose`` (3,):
+        fewer look-alikes; with ``born_before``, only those created before that stamp [ns]."""
+        from mrslam_core.fusion.maps import LandmarkMap
+
+        world = LandmarkMap.from_filter(self.slam)
+        reach = margin + float(np.linalg.norm(points[:, :2], axis=1).max()) + self.cfg.fusion.inlier_distance
+        keep = np.linalg.norm(world.means[:, :2] - pose[:2], axis=1) <= reach
+        if born_before is not None:
+            keep &= self.slam.landmarks.born[world.ids] < born_before
+        return world.subset(np.flatnonzero(keep))
 
     def _redraw(self, robot: str, fit: np.ndarray, cov: np.ndarray, floor: tuple[float, float],
                 stamp_ns: int | None = None) -> None:

@@ -331,13 +331,12 @@ def _rebuild_store(path, meta: dict[str, Any], arrays: dict[str, np.ndarray], m:
     store = LandmarkStore(m, dim, int(meta["descriptor_dim"]), 1, chunk)
     for name in STORE_ARRAYS:
         if name == "born" and "store.born" not in arrays:  # written before landmarks had birth stamps
+            store.born = np.full(store.descriptor.shape[0], -1, np.int64)
             continue
         setattr(store, name, np.array(arrays[f"store.{name}"]))
     store.size = int(meta["size"])
     pool = store.refcount.shape[0]
     cap = store.descriptor.shape[0]
-    if "store.born" not in arrays:
-        store.born = np.full(cap, -1, np.int64)
     checks = [
         (store.table.ndim == 2 and store.table.shape[0] == m, "table rows != particles"),
         (store.table.size == 0 or (0 <= store.table.min() and store.table.max() < pool), "table names a chunk outside the pool"),
