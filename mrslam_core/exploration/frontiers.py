@@ -5,6 +5,8 @@ from __future__ import annotations
 import numpy as np
 from scipy import ndimage
 
+from mrslam_core.arrays import unique_rows
+
 _EIGHT = np.ones((3, 3), bool)
 
 
@@ -34,6 +36,6 @@ def frontier_targets(groups: list[np.ndarray], stride: int) -> np.ndarray:
         centre = cells.mean(axis=0)
         out.append(cells[np.argmin(((cells - centre) ** 2).sum(1))])
         if len(cells) > 2 * stride:
-            coarse = np.unique(cells // stride, axis=0, return_index=True)[1]
+            coarse = unique_rows(cells // stride, return_index=True)[1]
             out.extend(cells[coarse])
-    return np.unique(np.array(out, dtype=np.int64).reshape(-1, 2), axis=0)
+    return unique_rows(np.array(out, dtype=np.int64).reshape(-1, 2))

@@ -10,6 +10,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from mrslam_core.arrays import unique_rows
 from mrslam_core.exploration.config import GridConfig
 
 
@@ -83,8 +84,8 @@ class OccupancyGrid:
         cells = self.cell_of(pts)
         end = self.cell_of(pose[:2] + scan.ranges[:, None] * np.column_stack([np.cos(ang), np.sin(ang)]))
         free_mask = self.inside(cells) & (steps[None, :] < scan.ranges[:, None] - self.res / 2)
-        free_cells = np.unique(cells[free_mask], axis=0)
-        hit_cells = np.unique(end[scan.hit & self.inside(end)], axis=0)
+        free_cells = unique_rows(cells[free_mask])
+        hit_cells = unique_rows(end[scan.hit & self.inside(end)])
         if free_cells.size:
             keep = np.ones(len(free_cells), bool)
             if hit_cells.size:  # a cell holding an obstacle end is not cleared by other beams

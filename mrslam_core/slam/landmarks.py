@@ -19,6 +19,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
+from mrslam_core.arrays import unique_rows
+
 _FIELDS = ("mean", "cov", "exists", "count", "score")
 
 
@@ -319,7 +321,7 @@ class LandmarkStore:
         for j in range(ncols):
             src = live[j * self.chunk : (j + 1) * self.chunk]
             src_cols = np.unique(src // self.chunk)
-            patterns, owner = np.unique(old_table[:, src_cols], axis=0, return_inverse=True)
+            patterns, owner = unique_rows(old_table[:, src_cols], return_inverse=True)
             ids = self._take_free(patterns.shape[0])
             off = src % self.chunk
             col_of = np.searchsorted(src_cols, src // self.chunk)
