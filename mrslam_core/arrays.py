@@ -9,9 +9,10 @@ def unique_rows(a: np.ndarray, return_index: bool = False, return_inverse: bool 
     """Unique rows of a 2-D array (N, K), in lexicographic order (first column first).
 
     The same answer as ``np.unique(a, axis=0, ...)``, computed with a stable ``lexsort`` on the
-    columns instead of a structured view: that view's comparison once raised ``TypeError: Cannot
-    compare structured arrays unless they have a common dtype`` inside a running node (numpy
-    2.4.6) for plain int64 cells, and it cannot be reproduced in isolation.
+    columns instead of numpy's structured view, whose comparison raised ``TypeError: Cannot
+    compare structured arrays unless they have a common dtype`` for int64 cells in an explore
+    node at the end of a demo run (numpy 2.4.6); neither random inputs nor a SIGINT during the
+    call reproduced it in isolation.
 
     Returns:
         unique rows (U, K); with ``return_index`` also (U,) the first row of each in ``a``; with
