@@ -112,7 +112,8 @@ def slam_params(cfg: DemoConfig, facts: dict, out: Path):
     from mrslam_ros.slam_node import SlamNodeConfig
 
     return SlamNodeConfig(robots=tuple(facts["names"]), start_poses=tuple(float(v) for v in facts["starts"].ravel()),
-                          max_wait=cfg.max_wait, filter=cfg.team.filter, output_dir=str(out / "slam"),
+                          max_wait=cfg.max_wait, filter=cfg.team.filter, map_check=cfg.team.map_check,
+                          output_dir=str(out / "slam"),
                           checkpoint=str(out / "slam" / "checkpoint.npz"), checkpoint_period=cfg.checkpoint_period)
 
 
@@ -250,7 +251,8 @@ def write_report(cfg: DemoConfig, out: Path, facts: dict, extra: dict | None = N
     info = {"explored_fraction": explored, "dropped": slam_stats.get("dropped", {}),
             "latency_ms": slam_stats.get("latency_ms"),
             "diagnostics": diagnostics(bag), "updates": slam_stats.get("updates", {}),
-            "outlier_matches": slam_stats.get("outlier_matches")}
+            "outlier_matches": slam_stats.get("outlier_matches"), "map_checks": slam_stats.get("map_checks"),
+            "relocalizations": slam_stats.get("relocalizations")}
     info.update(extra or {})
     return write_run(out, trajectories, cfg, np.asarray(slam_stats.get("update_ms_all", []), float), landmarks,
                      extra=info)

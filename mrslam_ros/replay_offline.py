@@ -161,7 +161,9 @@ def main(argv: list[str]) -> int:
     report = write_run(out, trajectories, cfg, np.asarray(mapper.update_ms), {"mean": mean, "cov": cov},
                        extra={"dropped": mapper.counters(), "messages": used, "wall_s": wall,
                               "live_difference": compare(est, live),
-                              "outlier_matches": mapper.slam.outlier_pairs / mapper.slam.num_particles})
+                              "outlier_matches": mapper.slam.outlier_pairs / mapper.slam.num_particles,
+                              "map_checks": dict(mapper.map_checks), "relocalizations": mapper.relocalizations,
+                              "merges": mapper.merges, "restarts": mapper.restarts})
     for name, r in report["robots"].items():
         if "ate_rmse_m" in r:
             diff = report["live_difference"].get(name)

@@ -1,5 +1,6 @@
-"""A simulated team, closed loop, in one process: simulator -> stereo frontends -> ONE multi-robot
-filter -> occupancy grid -> coordinated exploration -> drive commands.
+"""A simulated team, closed loop, in one process: simulator -> stereo frontends -> the central
+mapper (ONE multi-robot filter, with its map check) -> occupancy grid -> coordinated exploration
+-> drive commands.
 
 The same cores the ROS nodes wrap, without a graph: this is the reference the node suite is
 measured against and the fastest way to run an experiment. ``mrslam team --out DIR`` writes the
@@ -25,10 +26,10 @@ from mrslam_core.frontend.camera import StereoRig
 from mrslam_core.frontend.config import FrontendConfig
 from mrslam_core.frontend.frontend import Frontend
 from mrslam_core.geometry.se2 import between
+from mrslam_core.pipelines.central import CentralConfig, CentralMapper, MapCheckConfig
 from mrslam_core.sim.config import SimConfig
 from mrslam_core.sim.simulation import Simulation
 from mrslam_core.slam.config import AssociationConfig, FilterConfig, MotionConfig
-from mrslam_core.slam.filter import MultiRobotFastSLAM, RobotUpdate
 
 
 def _team_filter() -> FilterConfig:
@@ -95,6 +96,8 @@ class TeamConfig:
         seconds: simulated duration [s].
         control_period: exploration/drive command period [s].
         explore: send the robots to frontiers (else they stand still).
+        map_check: the central mapper's check of each robot against the older map (also the
+            demo's central node's).
     """
 
     robots: int = 3
@@ -104,6 +107,7 @@ class TeamConfig:
     sim: SimConfig = field(default_factory=SimConfig)
     frontend: FrontendConfig = field(default_factory=_team_frontend)
     filter: FilterConfig = field(default_factory=_team_filter)
+    map_check: MapCheckConfig = field(default_factory=MapCheckConfig)
     exploration: ExplorationConfig = field(default_factory=_team_exploration)
     grid: GridConfig = field(default_factory=GridConfig)
 
@@ -117,37 +121,40 @@ def run(cfg: TeamConfig, progress: bool = False) -> dict:
     starts = np.array([sim.ground_truth(n) for n in names])
     rig = StereoRig(*sim.camera_infos(), sim.camera_extrinsic())
     frontends = {n: Frontend(rig, cfg.frontend, robot=n) for n in names}
-    slam = MultiRobotFastSLAM(cfg.filter, names, starts)
+    mapper = CentralMapper(CentralConfig(robots=tuple(names), start_poses=tuple(float(v) for v in starts.ravel()),
+                                         map_check=cfg.map_check, filter=cfg.filter))
+    slam = mapper.slam
     grid = OccupancyGrid(cfg.grid)
     explorer = Explorer(cfg.exploration, names)
-    last_odom = {n: sim.odometry(n)[0] for n in names}
+    odom0 = {n: sim.odometry(n)[0] for n in names}
+    for n in names:
+        mapper.add_odometry(n, sim.time_ns, odom0[n])
     rec = {n: {"t": [0.0], "est": [starts[i]], "gt": [starts[i]], "odom": [starts[i]]} for i, n in enumerate(names)}
-    odom0 = dict(last_odom)
-    step_ms = []
     next_control = 0
     control_ns = int(cfg.control_period * 1e9)
     end_ns = int(cfg.seconds * 1e9)
     wall = time.perf_counter()
     while sim.time_ns < end_ns:
         sim.step()
+        scans = {}
         for n in sim.frames_due():
             frame = sim.render_stereo(n)
             obs, scan = frontends[n].step(frame.left, frame.right, frame.stamp_ns)
             odom = sim.odometry(n)[0]
-            delta = between(last_odom[n], odom)
-            last_odom[n] = odom
-            t0 = time.perf_counter()
-            slam.step([RobotUpdate(n, frame.stamp_ns, delta, obs)])
-            step_ms.append((time.perf_counter() - t0) * 1e3)
-            k = slam.index[n]
-            est = slam.estimate().mean[k]
-            if scan is not None:
-                grid.insert(est, Scan.from_obstacle_scan(scan))
+            mapper.add_odometry(n, frame.stamp_ns, odom)
+            if obs is None:  # a dropped frame: the next set carries its motion
+                continue
+            mapper.add_observations(obs)
+            scans[n] = scan
+        for done in mapper.process(flush=True):
+            n = done.robot
             r = rec[n]
-            r["t"].append(frame.stamp_ns * 1e-9)
-            r["est"].append(est)
+            r["t"].append(done.stamp_ns * 1e-9)
+            r["est"].append(done.pose)
             r["gt"].append(sim.ground_truth(n))
-            r["odom"].append(_odom_in_map(starts[k], odom0[n], odom))
+            r["odom"].append(_odom_in_map(starts[names.index(n)], odom0[n], done.odom))
+            if scans.get(n) is not None:
+                grid.insert(done.pose, Scan.from_obstacle_scan(scans[n]))
         if cfg.explore and sim.time_ns >= next_control:
             next_control += control_ns
             poses = {n: slam.estimate().mean[slam.index[n]] for n in names}
@@ -165,8 +172,9 @@ def run(cfg: TeamConfig, progress: bool = False) -> dict:
     if truth_free is not None:
         explored = _explored_fraction(grid, truth_free, cfg.grid.resolution)
     return {
-        "trajectories": trajectories, "update_ms": np.array(step_ms), "landmarks": {"mean": mean, "cov": cov},
-        "dropped": dict(slam.dropped), "frontend_drops": {n: dict(f.drops) for n, f in frontends.items()},
+        "trajectories": trajectories, "update_ms": np.array(mapper.update_ms), "landmarks": {"mean": mean, "cov": cov},
+        "dropped": dict(slam.dropped) | dict(mapper.drops), "map_checks": dict(mapper.map_checks),
+        "relocalizations": mapper.relocalizations, "frontend_drops": {n: dict(f.drops) for n, f in frontends.items()},
         "explored_fraction": explored, "exploration_state": explorer.state.value, "stalls": explorer.stalls, "held": explorer.held,
         "wall_s": time.perf_counter() - wall, "outlier_matches": slam.outlier_pairs / slam.num_particles,
     }
@@ -212,7 +220,8 @@ def main(argv: list[str]) -> int:
                        extra={"explored_fraction": res["explored_fraction"], "dropped": res["dropped"],
                               "frontend_drops": res["frontend_drops"], "wall_s": res["wall_s"],
                               "exploration_state": res["exploration_state"], "stalls": res["stalls"], "held": res["held"],
-                              "outlier_matches": res["outlier_matches"]})
+                              "outlier_matches": res["outlier_matches"], "map_checks": res["map_checks"],
+                              "relocalizations": res["relocalizations"]})
     for name, r in report["robots"].items():
         print(f"  {name}: ATE {r['ate_rmse_m']:.3f} m (odometry {r['odom_ate_rmse_m']:.3f} m), RPE {r['rpe_rmse_m']:.3f} m")
     u = report["update_ms"]

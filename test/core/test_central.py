@@ -1,6 +1,7 @@
 """The central mapper: stamp order across robots, bounded waits, pairing with odometry, counted drops."""
 
 import numpy as np
+import pytest
 
 from mrslam_core.geometry.se2 import compose
 from mrslam_core.pipelines.central import CentralConfig, CentralMapper
@@ -482,17 +483,48 @@ def _slip_run(**check) -> tuple[CentralMapper, np.ndarray]:
     return m, _slip_feed(m, 0.0, 18.0)[-1].pose
 
 
-def test_a_robot_turned_while_blind_is_moved_back_by_the_older_map():
-    """The map check aligns the robot's last 2 s of sets to the landmarks older than 3 s: two
-    checks in a row put it 0.15 rad from its estimate, and it is moved there; without the check
-    the 8.6° stay (its sets miss every landmark and are mapped again, turned)."""
-    m, pose = _slip_run(every=1.0, age=3.0)
+@pytest.mark.parametrize("poses", ["estimate", "odometry"])
+def test_a_robot_turned_while_blind_is_moved_back_by_the_older_map(poses):
+    """The map check aligns the robot's last 2 s of sets (placed by its estimates or by its
+    odometry) to the landmarks older than 3 s: two checks in a row put it 0.15 rad from its
+    estimate, and it is moved there; without the check the 8.6° stay (its sets miss every
+    landmark and are mapped again, turned)."""
+    m, pose = _slip_run(every=1.0, age=3.0, poses=poses)
     (e,) = m.relocalizations
     assert e["cause"] == "map_check" and 12.0 < e["stamp_ns"] / S < 15.0 and abs(e["turn_rad"] - 0.15) < 0.02, e
     assert m.map_checks["moved"] == 1 and m.map_checks["agreed"] >= 8, m.map_checks
     assert np.hypot(*(pose[:2] - [3.0, 0.0])) < 0.03 and abs(pose[2] - 0.15) < 0.01, pose
     m, pose = _slip_run(every=0.0)
     assert m.relocalizations == [] and not m.map_checks and abs(pose[2] - 0.15) > 0.1, pose
+
+
+def test_a_fit_that_explains_little_more_than_the_estimate_moves_nothing():
+    """The slip's fit has 54 inliers where the turned estimate explains 6 of the same matches
+    (recorded in the move); asking for a gain above 48 leaves the robot turned, every
+    disagreeing check counted as ambiguous."""
+    m, _ = _slip_run(every=1.0, age=3.0)
+    (e,) = m.relocalizations
+    assert (e["inliers"], e["estimate_inliers"]) == (54, 6), e
+    m, pose = _slip_run(every=1.0, age=3.0, min_gain=49)
+    assert m.relocalizations == [] and m.map_checks["ambiguous"] >= 2 and abs(pose[2] - 0.15) > 0.1, m.map_checks
+
+
+def test_support_counts_the_matches_a_pose_explains():
+    from mrslam_core.fusion.maps import LandmarkMap
+    from mrslam_core.pipelines.central import _support
+
+    src = np.array([[1.0, 0.0, 0.5], [2.0, 1.0, 0.5], [0.0, 3.0, 0.5]])
+    pose = np.array([1.0, 2.0, np.pi / 2])
+    # pose ⊕ src: (1, 3), (0, 4), (-2, 2); the third 0.2 m off, outside 0.1 m, inside 0.3 m
+    dst = np.array([[1.0, 3.0, 0.5], [0.0, 4.0, 0.5], [-1.8, 2.0, 0.5]])
+    cov = np.tile(np.eye(3) * 1e-4, (3, 1, 1))
+    desc = np.eye(3, dtype=np.float32)
+    target, source = LandmarkMap(dst, cov, desc), LandmarkMap(src, cov, desc)
+    matches = np.array([[0, 0], [1, 1], [2, 2]])
+    assert _support(target, source, matches, pose, 0.1) == 2
+    assert _support(target, source, matches, pose, 0.3) == 3
+    assert _support(target, source, matches, np.zeros(3), 0.1) == 0
+    assert _support(target, source, matches[:0], pose, 0.1) == 0
 
 
 def test_a_mapper_resumed_between_two_map_checks_continues_exactly(tmp_path):
