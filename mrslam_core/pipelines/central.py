@@ -61,7 +61,7 @@ class MapCheckConfig:
         min_gain: a fit that disagrees must explain at least this many more of the window's
             descriptor matches (within the fusion's inlier distance) than the robot's estimate
             does; otherwise the two are look-alikes of each other and the check is ``ambiguous``.
-            Recorded demos d1 and d3: moves that fixed a heading gained 9–20 inliers; a move
+            Recorded demos d1–d3: moves that fixed a heading gained 9–35 inliers; a move
             onto a fit 16° off gained 1, one onto a fit 0.8 m off gained 7.
         shift: a fit closer than this to the estimate, and within ``turn``, agrees with it [m].
         turn: see ``shift`` [rad].
