@@ -163,6 +163,15 @@ def apply_transform(transform: np.ndarray, pts: np.ndarray) -> np.ndarray:
     return np.stack([x, y], -1)
 
 
+def explained(transform: np.ndarray, target: LandmarkMap, source: LandmarkMap, matches: np.ndarray,
+              distance: float) -> np.ndarray:
+    """(P,) bool: the descriptor ``matches`` (P, 2) (target row, source row) whose source landmark,
+    moved by ``transform`` (3,), lands within ``distance`` [m] of its target landmark (planar)."""
+    matches = np.asarray(matches, np.int64).reshape(-1, 2)
+    moved = apply_transform(transform, source.means[matches[:, 1], :2])
+    return np.linalg.norm(moved - target.means[matches[:, 0], :2], axis=1) <= distance
+
+
 def match_descriptors(
     target: np.ndarray, source: np.ndarray, max_sq_dist: float, mutual: bool = True
 ) -> np.ndarray:

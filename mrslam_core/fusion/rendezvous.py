@@ -29,7 +29,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from scipy.stats import chi2
 
-from mrslam_core.fusion.alignment import apply_transform, match_descriptors
+from mrslam_core.fusion.alignment import explained, match_descriptors
 from mrslam_core.fusion.config import FusionConfig
 from mrslam_core.fusion.join import JoinResult, join_filters
 from mrslam_core.fusion.maps import LandmarkMap
@@ -249,8 +249,7 @@ def join_rendezvous(
     if len(target.means) and len(source.means):
         matches = match_descriptors(target.descriptors, source.descriptors, config.descriptor_threshold, config.mutual)
         if len(matches):
-            moved = apply_transform(rv.transform, source.means[matches[:, 1], :2])
-            ok = np.linalg.norm(moved - target.means[matches[:, 0], :2], axis=1) <= config.inlier_distance
+            ok = explained(rv.transform, target, source, matches, config.inlier_distance)
             pairs = np.column_stack([target.ids[matches[ok, 0]], source.ids[matches[ok, 1]]])
             if config.source_outliers == "drop":
                 drop = source.ids[matches[~ok, 1]]

@@ -193,17 +193,6 @@ class Processed:
     merged: bool = True
 
 
-def _support(target, source, matches: np.ndarray, pose: np.ndarray, distance: float) -> int:
-    """How many descriptor ``matches`` (P, 2) (target row, source row) land within ``distance``
-    [m] of their target landmark when the source map is placed at ``pose`` (3,)."""
-    from mrslam_core.fusion.alignment import apply_transform
-
-    if not len(matches):
-        return 0
-    err = apply_transform(pose, source.means[matches[:, 1], :2]) - target.means[matches[:, 0], :2]
-    return int(((err**2).sum(-1) <= distance**2).sum())
-
-
 class CentralMapper:
     """Queue, order and pair the team's messages; run the filter; keep the trajectories.
 
@@ -543,7 +532,7 @@ class CentralMapper:
         if obs.stamp_ns - self._checked.get(obs.robot, -(1 << 62)) < mc.every * 1e9:
             return
         self._checked[obs.robot] = int(obs.stamp_ns)
-        from mrslam_core.fusion.alignment import ransac_align
+        from mrslam_core.fusion.alignment import explained, ransac_align
         from mrslam_core.fusion.maps import FusionError
 
         frame = self._recent_frame(obs.robot, at)
@@ -568,7 +557,7 @@ class CentralMapper:
         if shift > mc.max_shift or abs(turn) > mc.max_turn:
             self.map_checks["too_far"] += 1
             return
-        support = _support(world, frame, al.matches, est, self.cfg.fusion.inlier_distance)
+        support = int(explained(est, world, frame, al.matches, self.cfg.fusion.inlier_distance).sum())
         if len(al.inliers) - support < mc.min_gain:
             self.map_checks["ambiguous"] += 1
             self._pending.pop(obs.robot, None)

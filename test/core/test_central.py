@@ -509,24 +509,6 @@ def test_a_fit_that_explains_little_more_than_the_estimate_moves_nothing():
     assert m.relocalizations == [] and m.map_checks["ambiguous"] >= 2 and abs(pose[2] - 0.15) > 0.1, m.map_checks
 
 
-def test_support_counts_the_matches_a_pose_explains():
-    from mrslam_core.fusion.maps import LandmarkMap
-    from mrslam_core.pipelines.central import _support
-
-    src = np.array([[1.0, 0.0, 0.5], [2.0, 1.0, 0.5], [0.0, 3.0, 0.5]])
-    pose = np.array([1.0, 2.0, np.pi / 2])
-    # pose ⊕ src: (1, 3), (0, 4), (-2, 2); the third 0.2 m off, outside 0.1 m, inside 0.3 m
-    dst = np.array([[1.0, 3.0, 0.5], [0.0, 4.0, 0.5], [-1.8, 2.0, 0.5]])
-    cov = np.tile(np.eye(3) * 1e-4, (3, 1, 1))
-    desc = np.eye(3, dtype=np.float32)
-    target, source = LandmarkMap(dst, cov, desc), LandmarkMap(src, cov, desc)
-    matches = np.array([[0, 0], [1, 1], [2, 2]])
-    assert _support(target, source, matches, pose, 0.1) == 2
-    assert _support(target, source, matches, pose, 0.3) == 3
-    assert _support(target, source, matches, np.zeros(3), 0.1) == 0
-    assert _support(target, source, matches[:0], pose, 0.1) == 0
-
-
 def test_a_mapper_resumed_between_two_map_checks_continues_exactly(tmp_path):
     """Saved at 13.1 s, after the first check that disagreed and before the second: the recent
     sets, the waiting fit and the check clock are in the checkpoint, so the resumed mapper moves

@@ -9,6 +9,7 @@ import pytest
 from mrslam_core.fusion.alignment import (
     alignment_error,
     apply_transform,
+    explained,
     match_descriptors,
     ransac_align,
     rigid_transform_2d,
@@ -136,3 +137,18 @@ def test_landmark_covariance_bound_equals_the_isotropic_one_and_weighs_each_pair
     c = transform_information_covariance(t, src, loose, iso)
     drop = transform_cramer_rao(t, src[1:], 0.05)
     assert np.trace(transform_cramer_rao(t, src, 0.05)) < np.trace(c) < np.trace(drop)
+
+
+def test_explained_counts_the_matches_a_pose_explains():
+    src = np.array([[1.0, 0.0, 0.5], [2.0, 1.0, 0.5], [0.0, 3.0, 0.5]])
+    pose = np.array([1.0, 2.0, np.pi / 2])
+    # pose ⊕ src: (1, 3), (0, 4), (-2, 2); the third 0.2 m off, outside 0.1 m, inside 0.3 m
+    dst = np.array([[1.0, 3.0, 0.5], [0.0, 4.0, 0.5], [-1.8, 2.0, 0.5]])
+    cov = np.tile(np.eye(3) * 1e-4, (3, 1, 1))
+    desc = np.eye(3, dtype=np.float32)
+    target, source = LandmarkMap(dst, cov, desc), LandmarkMap(src, cov, desc)
+    matches = np.array([[0, 0], [1, 1], [2, 2]])
+    assert explained(pose, target, source, matches, 0.1).sum() == 2
+    assert explained(pose, target, source, matches, 0.3).sum() == 3
+    assert explained(np.zeros(3), target, source, matches, 0.1).sum() == 0
+    assert explained(pose, target, source, matches[:0], 0.1).sum() == 0
