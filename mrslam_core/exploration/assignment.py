@@ -1,4 +1,5 @@
-"""Target assignment: utility discounted near assigned targets (002 eq. 8–9), robots in turn."""
+"""Target assignment: utility discounted near assigned targets (002 eq. 8–9), the best
+(robot, target) pair first (Burgard et al. 2005, Table 1)."""
 
 from __future__ import annotations
 
@@ -9,6 +10,11 @@ def assign_targets(
     targets_xy: np.ndarray, cost: np.ndarray, beta: float, utility_range: float, coordinated: bool = True
 ) -> np.ndarray:
     """Choose one target per robot.
+
+    Coordinated, the pair (robot i, target t) maximising U_t − β·V_t^i over the robots not yet
+    assigned is taken first, then the utility of targets within ``utility_range`` of t is
+    discounted, and so on until every robot has a target or none is reachable. The order of the
+    robots does not matter: the robot nearest a frontier gets it, not the one listed first.
 
     Args:
         targets_xy: (T, 2) candidate target positions [m].
@@ -22,16 +28,22 @@ def assign_targets(
         (K,) index of each robot's target, −1 where no target is reachable.
     """
     k, t = cost.shape
-    utility = np.ones(t)
     chosen = np.full(k, -1, np.int64)
-    for i in range(k):
-        score = utility - beta * cost[i]
-        score[~np.isfinite(cost[i])] = -np.inf
-        if not np.isfinite(score).any():
-            continue
-        j = int(np.argmax(score))
+    if t == 0:
+        return chosen
+    utility = np.ones(t)
+    reachable = np.isfinite(cost)
+    if not coordinated:
+        score = np.where(reachable, utility - beta * np.where(reachable, cost, 0.0), -np.inf)
+        ok = reachable.any(axis=1)
+        chosen[ok] = np.argmax(score[ok], axis=1)
+        return chosen
+    open_ = reachable.any(axis=1)
+    while open_.any():
+        score = np.where(reachable & open_[:, None], utility - beta * np.where(reachable, cost, 0.0), -np.inf)
+        i, j = np.unravel_index(int(np.argmax(score)), score.shape)
         chosen[i] = j
-        if coordinated:
-            d = np.linalg.norm(targets_xy - targets_xy[j], axis=1)
-            utility -= np.where(d < utility_range, 1.0 - d / utility_range, 0.0)
+        open_[i] = False
+        d = np.linalg.norm(targets_xy - targets_xy[j], axis=1)
+        utility -= np.where(d < utility_range, 1.0 - d / utility_range, 0.0)
     return chosen

@@ -40,6 +40,11 @@ class ExplorationConfig:
         occ_max: cells with occupancy probability above this are not traversable.
         min_frontier_cells: smaller frontier groups are ignored.
         robot_radius: obstacles are inflated by this for planning [m].
+        target_reach: a frontier cell a robot cannot stand on (within ``robot_radius`` of an
+            obstacle: beside a wall, or amid the scattered far-range hits of a stereo camera at
+            the end of a corridor) is targeted from the nearest passable cell within this
+            distance; frontiers with none are skipped (0: only frontier cells the robot can
+            stand on are targets) [m].
         min_target_distance: frontier targets closer than this to the robot are skipped (the
             unknown just behind a robot with a forward-looking sensor is not worth a goal) [m].
         avoid_others: frontier targets closer than ``min_target_distance`` to any robot of the
@@ -99,6 +104,7 @@ class ExplorationConfig:
     occ_max: float = 0.65
     min_frontier_cells: int = 5
     robot_radius: float = 0.35
+    target_reach: float = 0.0
     min_target_distance: float = 1.0
     avoid_others: bool = False
     goal_tolerance: float = 0.4

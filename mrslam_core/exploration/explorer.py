@@ -11,7 +11,7 @@ import numpy as np
 from mrslam_core.exploration.assignment import assign_targets
 from mrslam_core.exploration.config import ExplorationConfig
 from mrslam_core.exploration.cost import travel_cost
-from mrslam_core.exploration.frontiers import frontier_cells, frontier_groups, frontier_targets
+from mrslam_core.exploration.frontiers import frontier_cells, frontier_groups, frontier_targets, standing_cells
 from mrslam_core.exploration.grid import OccupancyGrid
 from mrslam_core.exploration.planning import astar, inflate, pure_pursuit
 
@@ -99,6 +99,9 @@ class Explorer:
     plans: int = 0
     checkpoints: dict[str, tuple[np.ndarray, float]] = field(default_factory=dict)
     recovering_until: dict[str, float] = field(default_factory=dict)
+    #: per robot, the direction of its last recovery (−1 backward, +1 forward) and its (x, y) [m]
+    #: when the recovery began
+    recovery: dict[str, tuple[float, np.ndarray]] = field(default_factory=dict)
     known_at_plan: int = 0
     #: bumper hits: (x, y) [m] map frame, obstacles for planning until ``bump_until`` [s]
     bumps: list[np.ndarray] = field(default_factory=list)
@@ -119,29 +122,39 @@ class Explorer:
         self.last_plan_s = now
         self.known_at_plan = int(grid.observed.sum())
         passable, prob = planning_layers(grid, [poses[n] for n in self.robots], cfg, self.bumps)
-        frontier &= passable  # a frontier the robot cannot stand on (hugging a wall) is not a goal
+        if cfg.target_reach <= 0:
+            frontier &= passable  # a frontier the robot cannot stand on (hugging a wall) is not a goal
         waiting = False  # a frontier blocked only for now will be tried again: not complete yet
+        blocked = []  # (x, y) [m] of the blacklist entries in force, and whether for good
         if self.blacklist:
             centres = grid.centre_of(np.argwhere(frontier))
             bad = np.zeros(len(centres), bool)
             for b, (fails, until) in zip(self.blacklist, self.strikes):
-                near = np.linalg.norm(centres - b, axis=1) < cfg.blacklist_radius
                 if fails >= cfg.max_strikes or now < until:
+                    blocked.append((b, fails >= cfg.max_strikes))
+                    near = np.linalg.norm(centres - b, axis=1) < cfg.blacklist_radius
                     bad |= near
                     waiting |= fails < cfg.max_strikes and int(near.sum()) >= cfg.min_frontier_cells
             fc = np.argwhere(frontier)[bad]
             frontier[fc[:, 0], fc[:, 1]] = False
         groups = frontier_groups(frontier, cfg.min_frontier_cells)
-        if not groups and free.any() and not waiting:
+        targets = frontier_targets(groups, max(1, int(round(1.0 / grid.res)))) if groups else np.zeros((0, 2), np.int64)
+        if cfg.target_reach > 0 and len(targets):
+            targets = standing_cells(targets, passable, cfg.target_reach / grid.res)
+            if blocked and len(targets):  # a standing cell may lie off its frontier's blacklisted cells
+                d = np.linalg.norm(grid.centre_of(targets)[:, None] - np.array([b for b, _ in blocked])[None], axis=2)
+                near = d < cfg.blacklist_radius  # (T, B)
+                waiting |= bool(near[:, [not good for _, good in blocked]].any())
+                targets = targets[~near.any(axis=1)]
+        if not len(targets) and free.any() and not waiting:
             if self.state is State.EXPLORING:
                 self.state = State.RETURNING if cfg.return_to_start else State.COMPLETE
             if self.state is State.RETURNING:
                 for name in self.robots:
                     self._set_goal(name, self.starts[name][:2], grid, passable, poses, now)
             return
-        if not groups:
+        if not len(targets):
             return
-        targets = frontier_targets(groups, max(1, int(round(1.0 / grid.res))))
         cells = np.array([grid.cell_of(poses[n][:2]) for n in self.robots])
         cells = np.clip(cells, 0, np.array(grid.shape) - 1)
         cost = travel_cost(prob, cells, cfg.occ_max, grid.res)[:, targets[:, 0], targets[:, 1]]
@@ -207,6 +220,18 @@ class Explorer:
         self.blacklist.append(np.asarray(target, float))
         self.strikes.append([1.0, now + cfg.blacklist_period])
 
+    def _recovery_direction(self, name: str, poses: dict[str, np.ndarray]) -> float:
+        """Back off (−1), unless the last recovery backed off and did not move the robot: then
+        drive forward (+1). A robot whose rear corner touches a wall cannot back off along it
+        (the wheels do not slip), nor turn that corner into the wall; pulling forward frees it."""
+        last = self.recovery.get(name)
+        if last is None:
+            return -1.0
+        direction, start = last
+        if np.linalg.norm(np.asarray(poses[name])[:2] - start) < 0.05:
+            return -direction
+        return -1.0
+
     def _stalled(self, name: str, poses: dict[str, np.ndarray], now: float) -> bool:
         """Whether ``name`` was commanded forward for ``stall_time`` and did not follow (see
         :class:`ExplorationConfig`); if so, a bumper hit is recorded ahead of it."""
@@ -263,6 +288,7 @@ class Explorer:
                 self.goals[name] = None
                 self.checkpoints[name] = (poses[name][:2].copy(), now)
                 self.recovering_until[name] = now + cfg.recovery_time  # back off before the next goal
+                self.recovery[name] = (self._recovery_direction(name, poses), poses[name][:2].copy())
                 due = True
         if due and self.state is not State.COMPLETE:
             grid_ok = grid.observed.any()
@@ -272,7 +298,7 @@ class Explorer:
         for name in self.robots:
             g = self.goals.get(name)
             if now < self.recovering_until.get(name, -np.inf) and self.state is not State.COMPLETE:
-                commands[name] = (-cfg.recovery_speed, 0.0)
+                commands[name] = (self.recovery.get(name, (-1.0, None))[0] * cfg.recovery_speed, 0.0)
                 continue
             if g is None or self.state is State.COMPLETE or now - self.first_seen[name] < cfg.start_delay:
                 commands[name] = (0.0, 0.0)

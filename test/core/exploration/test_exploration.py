@@ -46,6 +46,19 @@ def test_assignment_spreads_robots():
     assert assign_targets(targets, unreachable, 0.5, 4.0).tolist() == [-1]
 
 
+def test_the_best_robot_target_pair_is_assigned_first_whatever_the_robots_order():
+    # target 0 is beside robot 1; robot 0, listed first, is 1 m from it and 1.2 m from target 1
+    targets = np.array([[0.0, 0.0], [8.0, 0.0]])
+    cost = np.array([[1.0, 1.2], [0.1, 3.0]])
+    # pair scores U - 0.5 V: (1, 0) 0.95 first; then target 0's utility is 0, robot 0 takes 1 (0.4 > -0.5)
+    assert assign_targets(targets, cost, beta=0.5, utility_range=4.0).tolist() == [1, 0]
+    assert assign_targets(targets, cost[::-1], beta=0.5, utility_range=4.0).tolist() == [0, 1]
+    # a robot that reaches nothing gets no target; the others are still assigned
+    cost3 = np.vstack([cost, np.full(2, np.inf)])
+    assert assign_targets(targets, cost3, beta=0.5, utility_range=4.0).tolist() == [1, 0, -1]
+    assert assign_targets(np.zeros((0, 2)), np.zeros((2, 0)), 0.5, 4.0).tolist() == [-1, -1]
+
+
 def test_frontiers_on_a_known_map():
     known = np.zeros((6, 8), bool)
     known[:, :4] = True
@@ -107,7 +120,7 @@ def test_pure_pursuit_with_keep_arc_drives_the_arc_it_aims_at_when_the_turn_rate
 
 def test_seeded_run_explores_small_world_and_stops():
     sim = TeamSim2D(load_world("small"), 2, ExplorationConfig(return_to_start=True), seed=3)
-    curve = sim.run(300)
+    curve = sim.run(300, stop_at=2.0)  # never stopped by coverage: only by the explorer
     assert curve[-1][1] >= 0.9
     assert sim.explorer.state is State.COMPLETE
     assert curve[-1][0] < 300  # stopped by itself, did not run out of time
@@ -193,6 +206,34 @@ def test_a_stalled_robot_marks_a_bumper_hit_backs_off_and_plans_around_it():
     assert d.min() >= cfg.bumper_range / 2, d.min()  # round the bumper hit, not through it
     ex.step(grid, {"r": pose}, 1.6 + cfg.blacklist_period)
     assert ex.bumps == []
+
+
+def test_a_robot_that_could_not_back_off_pulls_forward_next_time():
+    """A robot wedged with a rear corner on a wall moves neither back nor round: its goal fails
+    (no headway for progress_timeout), it backs off and does not move; at the next failure it
+    recovers forward, then backward again. A robot that did move while backing off backs off."""
+    from mrslam_core.exploration.explorer import Explorer
+
+    cfg = ExplorationConfig(robot_radius=0.2, min_target_distance=0.5, progress_timeout=2.0, recovery_time=1.0)
+
+    def recoveries(moves_when_backing: bool) -> list[float]:
+        """The sign of v at the start of each of the first three recoveries."""
+        ex = Explorer(cfg, ["r"])
+        pose = np.array([0.5, 2.0, 0.0])
+        signs, t = [], 0.0
+        while len(signs) < 3 and t < 30.0:
+            started = ex.recovering_until.get("r")
+            v, w = ex.step(_open_room(), {"r": pose.copy()}, t)["r"]
+            if ex.recovering_until.get("r") != started:
+                assert abs(v) == cfg.recovery_speed and w == 0.0
+                signs.append(float(np.sign(v)))
+            if v < 0 and moves_when_backing:
+                pose[0] += v * 0.2
+            t = round(t + 0.2, 6)
+        return signs
+
+    assert recoveries(moves_when_backing=False) == [-1.0, 1.0, -1.0]
+    assert recoveries(moves_when_backing=True) == [-1.0, -1.0, -1.0]
 
 
 def test_a_robot_that_follows_its_commands_never_stalls():
@@ -301,11 +342,13 @@ def test_a_cost_on_unseen_cells_keeps_the_path_in_seen_space():
 def test_a_robot_is_not_sent_to_the_unseen_ground_around_a_teammate(avoid_others):
     """robot2 stands 0.5 m before the frontier along x = 4 m, straight ahead of robot1. Without
     ``avoid_others`` robot1 is sent to the frontier just behind robot2 (the shortest way); with
-    it, to a part of the frontier at least ``min_target_distance`` (1 m) from robot2."""
+    it, to a part of the frontier at least ``min_target_distance`` (1 m) from robot2. Targets
+    are chosen uncoordinated, so that the discount of robot2's own target does not decide it."""
     from mrslam_core.exploration.explorer import Explorer
 
     grid = _open_room()
-    ex = Explorer(ExplorationConfig(robot_radius=0.2, avoid_others=avoid_others), ["robot1", "robot2"])
+    cfg = ExplorationConfig(robot_radius=0.2, avoid_others=avoid_others, coordinated=False)
+    ex = Explorer(cfg, ["robot1", "robot2"])
     poses = {"robot1": np.array([0.5, 2.0, 0.0]), "robot2": np.array([3.5, 2.0, 0.0])}
     ex.step(grid, poses, 0.0)
     d = float(np.linalg.norm(ex.goals["robot1"].target - poses["robot2"][:2]))
