@@ -7,7 +7,8 @@ import numpy as np
 
 
 def assign_targets(
-    targets_xy: np.ndarray, cost: np.ndarray, beta: float, utility_range: float, coordinated: bool = True
+    targets_xy: np.ndarray, cost: np.ndarray, beta: float, utility_range: float, coordinated: bool = True,
+    bonus: np.ndarray | None = None,
 ) -> np.ndarray:
     """Choose one target per robot.
 
@@ -23,6 +24,8 @@ def assign_targets(
         utility_range: max_range of P(d) = 1 − d/max_range [m].
         coordinated: discount the utility after each assignment (else every robot ignores the
             others and may pick the same target).
+        bonus: (K, T) added to robot i's score of target t (a robot's current target, so that it
+            is replaced only by a clearly better one); None: 0.
 
     Returns:
         (K,) index of each robot's target, −1 where no target is reachable.
@@ -33,14 +36,15 @@ def assign_targets(
         return chosen
     utility = np.ones(t)
     reachable = np.isfinite(cost)
+    extra = np.zeros(cost.shape) if bonus is None else np.asarray(bonus, float)
     if not coordinated:
-        score = np.where(reachable, utility - beta * np.where(reachable, cost, 0.0), -np.inf)
+        score = np.where(reachable, utility - beta * np.where(reachable, cost, 0.0) + extra, -np.inf)
         ok = reachable.any(axis=1)
         chosen[ok] = np.argmax(score[ok], axis=1)
         return chosen
     open_ = reachable.any(axis=1)
     while open_.any():
-        score = np.where(reachable & open_[:, None], utility - beta * np.where(reachable, cost, 0.0), -np.inf)
+        score = np.where(reachable & open_[:, None], utility - beta * np.where(reachable, cost, 0.0) + extra, -np.inf)
         i, j = np.unravel_index(int(np.argmax(score)), score.shape)
         chosen[i] = j
         open_[i] = False

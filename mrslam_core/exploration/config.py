@@ -52,6 +52,11 @@ class ExplorationConfig:
             is never in view (its own camera looks ahead), so its frontier is not worth a goal,
             and a teammate sent there drives into it (robots starting 1 m apart were sent to
             each other's start spots and wedged against each other).
+        keep_goal: at a re-assignment, a robot's current target (the candidate nearest it,
+            within 1 m, as its frontier recedes) scores this much more for that robot, so that it
+            turns to a new target only for a clearly better one (utility units, U = 1 per
+            target; 0: every re-assignment starts afresh). Robots that swap targets at every
+            re-assignment turn on the spot, the hardest motion for a camera to track.
         goal_tolerance: a goal counts as reached within this distance [m].
         replan_period: re-assign targets at least this often [s].
         replan_new_area: re-assign sooner (at most once a second) when this much new area has
@@ -107,6 +112,7 @@ class ExplorationConfig:
     target_reach: float = 0.0
     min_target_distance: float = 1.0
     avoid_others: bool = False
+    keep_goal: float = 0.0
     goal_tolerance: float = 0.4
     replan_period: float = 4.0
     replan_new_area: float = 4.0

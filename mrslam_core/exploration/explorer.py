@@ -16,6 +16,11 @@ from mrslam_core.exploration.grid import OccupancyGrid
 from mrslam_core.exploration.planning import astar, inflate, pure_pursuit
 
 
+#: candidate targets within this of a robot's current target count as that target (``keep_goal``);
+#: the candidates along a frontier are 1 m apart [m]
+KEEP_RADIUS = 1.0
+
+
 class State(Enum):
     EXPLORING = "exploring"
     RETURNING = "returning"
@@ -164,7 +169,16 @@ class Explorer:
         if cfg.avoid_others:  # the unseen ground around any robot: another one would drive into it
             near = np.broadcast_to(near.any(axis=0), near.shape)
         far_cost = np.where(near, np.inf, cost)
-        chosen = assign_targets(txy, far_cost, cfg.beta, cfg.utility_range, cfg.coordinated)
+        bonus = None
+        if cfg.keep_goal > 0:  # a robot's current target, or the candidate that replaces it as the frontier recedes
+            bonus = np.zeros(cost.shape)
+            for i, name in enumerate(self.robots):
+                g = self.goals.get(name)
+                if g is not None and self.state is State.EXPLORING:
+                    d = np.linalg.norm(txy - g.target, axis=1)
+                    if d.min() <= KEEP_RADIUS:
+                        bonus[i, int(np.argmin(d))] = cfg.keep_goal
+        chosen = assign_targets(txy, far_cost, cfg.beta, cfg.utility_range, cfg.coordinated, bonus)
         for i in np.flatnonzero(chosen < 0):  # only near frontiers left: turn and look at them
             if np.isfinite(cost[i]).any():
                 chosen[i] = int(np.argmin(cost[i]))

@@ -59,6 +59,37 @@ def test_the_best_robot_target_pair_is_assigned_first_whatever_the_robots_order(
     assert assign_targets(np.zeros((0, 2)), np.zeros((2, 0)), 0.5, 4.0).tolist() == [-1, -1]
 
 
+def test_a_bonus_keeps_a_robots_target_unless_another_is_clearly_better():
+    targets = np.array([[0.0, 0.0], [5.0, 0.0]])
+    cost = np.array([[0.5, 0.3]])  # target 1 scores 0.2 better
+    assert assign_targets(targets, cost, beta=1.0, utility_range=4.0).tolist() == [1]
+    kept = np.array([[0.3, 0.0]])  # the robot is on its way to target 0
+    assert assign_targets(targets, cost, 1.0, 4.0, bonus=kept).tolist() == [0]
+    assert assign_targets(targets, np.array([[0.8, 0.3]]), 1.0, 4.0, bonus=kept).tolist() == [1]  # 0.5 better
+
+
+def test_the_explorer_keeps_a_robots_target_against_a_marginally_better_one():
+    """robot1 drives west to the frontier at x = 1 m. Then a small unseen patch shows up 1 m behind
+    it (x 3.4–3.8 m, y 1–2 m), a frontier a little nearer than the one it drives to: without
+    ``keep_goal`` it turns round for it, with ``keep_goal`` it keeps its target."""
+    from mrslam_core.exploration.explorer import Explorer
+
+    def room(patch: bool) -> OccupancyGrid:
+        grid = OccupancyGrid(GridConfig(resolution=0.1, size=(8.0, 3.0), origin=(0.0, 0.0)))
+        grid.observed[:, 10:60] = True  # x 1–6 m seen free
+        if patch:
+            grid.observed[10:20, 34:38] = False
+        grid.logodds[grid.observed] = -3.0
+        return grid
+
+    for keep, turns in ((0.0, True), (0.3, False)):
+        ex = Explorer(ExplorationConfig(robot_radius=0.2, keep_goal=keep), ["robot1"])
+        ex.step(room(False), {"robot1": np.array([2.5, 1.5, np.pi])}, 0.0)
+        assert ex.goals["robot1"].target[0] < 1.5  # west, the nearer frontier
+        ex.step(room(True), {"robot1": np.array([2.3, 1.5, np.pi])}, 5.0)
+        assert (ex.goals["robot1"].target[0] > 3.0) == turns, (keep, ex.goals["robot1"].target)
+
+
 def test_frontiers_on_a_known_map():
     known = np.zeros((6, 8), bool)
     known[:, :4] = True
