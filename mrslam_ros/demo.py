@@ -238,11 +238,13 @@ def write_report(cfg: DemoConfig, out: Path, facts: dict, extra: dict | None = N
         est = {r: series[r]["pose"].arrays() for r in names}
     starts = {r: facts["starts"][i] for i, r in enumerate(names)}
     trajectories = evaluation_trajectories(est, series, starts)
-    explored = None
+    explored = occupancy = None
     grid = last_message(bag, "/map")
     if grid is not None:
-        _, known, origin, res = occupancy_to_arrays(grid)
+        prob, known, origin, res = occupancy_to_arrays(grid)
         explored = explored_fraction(known, origin, res, facts["truth_free"], cfg.team.grid.resolution)
+        occupancy = {"probability": prob, "known": known, "origin": origin, "resolution": res,
+                     "free_thresh": cfg.team.grid.free_below, "occupied_thresh": cfg.team.grid.occupied_above}
     slam_stats = slam_stats or {}
     landmarks = None
     if map_npz is not None and map_npz.is_file():
@@ -255,7 +257,7 @@ def write_report(cfg: DemoConfig, out: Path, facts: dict, extra: dict | None = N
             "relocalizations": slam_stats.get("relocalizations")}
     info.update(extra or {})
     return write_run(out, trajectories, cfg, np.asarray(slam_stats.get("update_ms_all", []), float), landmarks,
-                     extra=info)
+                     extra=info, occupancy=occupancy)
 
 
 def main(argv: list[str]) -> int:

@@ -22,13 +22,17 @@ def _ellipse(mean: np.ndarray, cov: np.ndarray, nsigma: float = 2.0, **kw) -> El
     return Ellipse(mean[:2], 2 * nsigma * np.sqrt(vals[1]), 2 * nsigma * np.sqrt(vals[0]), angle=angle, **kw)
 
 
-def plot_run(out: Path, trajectories: dict, landmarks: dict | None = None, truth_landmarks=None) -> list[Path]:
-    """Write trajectories.png, map.png and errors.png into ``out``; returns their paths.
+def plot_run(out: Path, trajectories: dict, landmarks: dict | None = None, truth_landmarks=None,
+             occupancy: dict | None = None) -> list[Path]:
+    """Write trajectories.png, map.png, occupancy.png and errors.png into ``out``; returns their paths.
 
     Args:
         trajectories: robot -> {"t": (N,), "est": (N, 3), "gt": (N, 3) or None, "odom": (N, 3) or None}.
         landmarks: {"mean": (L, dim), "cov": (L, dim, dim)} of the best particle, or None.
         truth_landmarks: (T, 2) ground-truth landmark positions, or None.
+        occupancy: the occupancy grid at the end, {"probability": (H, W) in [0, 1], "known": (H, W)
+            bool, "origin": (x, y) [m] of cell (0, 0)'s corner, "resolution": [m/cell]}; row i is
+            y = origin_y + (i + ½)·resolution.
     """
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -73,6 +77,9 @@ def plot_run(out: Path, trajectories: dict, landmarks: dict | None = None, truth
         fig.savefig(written[-1], dpi=110)
         plt.close(fig)
 
+    if occupancy is not None:
+        written.append(_plot_occupancy(out / "occupancy.png", occupancy, trajectories, colors))
+
     if any(tr.get("gt") is not None for tr in trajectories.values()):
         fig, ax = plt.subplots(figsize=(9, 4))
         for i, (name, tr) in enumerate(sorted(trajectories.items())):
@@ -91,3 +98,29 @@ def plot_run(out: Path, trajectories: dict, landmarks: dict | None = None, truth
         fig.savefig(written[-1], dpi=110)
         plt.close(fig)
     return written
+
+
+def _plot_occupancy(path: Path, occupancy: dict, trajectories: dict, colors: list) -> Path:
+    """The grid (white free, black occupied, grey unknown) with the estimated and true paths."""
+    prob = np.asarray(occupancy["probability"], float)
+    known = np.asarray(occupancy["known"], bool)
+    res = float(occupancy["resolution"])
+    ox, oy = np.asarray(occupancy["origin"], float)[:2]
+    h, w = prob.shape
+    fig, ax = plt.subplots(figsize=(9, 7))
+    ax.imshow(np.where(known, 1.0 - prob, 0.5), origin="lower", cmap="gray", vmin=0.0, vmax=1.0,
+              extent=(ox, ox + w * res, oy, oy + h * res), interpolation="nearest")
+    for i, (name, tr) in enumerate(sorted(trajectories.items())):
+        c = colors[i % len(colors)]
+        if tr.get("gt") is not None:
+            ax.plot(tr["gt"][:, 0], tr["gt"][:, 1], "-", color=c, lw=1.0, alpha=0.5, label=f"{name} truth")
+        ax.plot(tr["est"][:, 0], tr["est"][:, 1], "--", color=c, lw=1.2, label=f"{name} estimate")
+        ax.plot(*tr["est"][-1, :2], "o", color=c, ms=4)
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    ax.legend(fontsize=7, ncol=2)
+    ax.set_title(f"Occupancy grid: {known.mean():.0%} of the cells known")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path

@@ -12,6 +12,7 @@ from mrslam_core.configio import to_dict, write_yaml
 from mrslam_core.evaluation.metrics import ate_rmse, heading_rmse, rpe_rmse
 from mrslam_core.evaluation.plots import plot_run
 from mrslam_core.evaluation.tum import write_tum
+from mrslam_core.exploration.mapfile import save_map_file
 
 
 def latency_summary(ms: np.ndarray) -> dict[str, float]:
@@ -49,6 +50,7 @@ def write_run(
     truth_landmarks: np.ndarray | None = None,
     extra: dict | None = None,
     plots: bool = True,
+    occupancy: dict | None = None,
 ) -> dict:
     """Write the run folder and return the report.
 
@@ -60,6 +62,9 @@ def write_run(
         landmarks: best particle's map {"mean": (L, dim), "cov": (L, dim, dim)}.
         truth_landmarks: (T, 2) ground-truth landmark positions for the map plot.
         extra: more top-level report entries.
+        occupancy: the final occupancy grid (see :func:`plot_run`; optional "free_thresh" and
+            "occupied_thresh"), plotted as occupancy.png and written as occupancy.yaml + .pgm in
+            the ROS map_server format.
     """
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -74,8 +79,13 @@ def write_run(
         "config": to_dict(config),
     }
     report.update(extra or {})
+    if occupancy is not None:
+        thresholds = {k: occupancy[k] for k in ("free_thresh", "occupied_thresh") if k in occupancy}
+        save_map_file(out / "occupancy.yaml", occupancy["probability"], occupancy["known"], occupancy["origin"],
+                      occupancy["resolution"], **thresholds)
+        report["occupancy_map"] = "occupancy.yaml"
     if plots:
-        report["plots"] = [p.name for p in plot_run(out, trajectories, landmarks, truth_landmarks)]
+        report["plots"] = [p.name for p in plot_run(out, trajectories, landmarks, truth_landmarks, occupancy)]
     write_yaml(config, out / "config.yaml")
     (out / "report.json").write_text(json.dumps(report, indent=2, default=float))
     return report

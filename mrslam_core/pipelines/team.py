@@ -177,6 +177,9 @@ def run(cfg: TeamConfig, progress: bool = False) -> dict:
         "relocalizations": mapper.relocalizations, "frontend_drops": {n: dict(f.drops) for n, f in frontends.items()},
         "explored_fraction": explored, "exploration_state": explorer.state.value, "stalls": explorer.stalls, "held": explorer.held,
         "wall_s": time.perf_counter() - wall, "outlier_matches": slam.outlier_pairs / slam.num_particles,
+        "occupancy": {"probability": grid.probability(), "known": grid.observed.copy(), "origin": grid.origin,
+                      "resolution": grid.res, "free_thresh": cfg.grid.free_below,
+                      "occupied_thresh": cfg.grid.occupied_above},
     }
 
 
@@ -221,7 +224,7 @@ def main(argv: list[str]) -> int:
                               "frontend_drops": res["frontend_drops"], "wall_s": res["wall_s"],
                               "exploration_state": res["exploration_state"], "stalls": res["stalls"], "held": res["held"],
                               "outlier_matches": res["outlier_matches"], "map_checks": res["map_checks"],
-                              "relocalizations": res["relocalizations"]})
+                              "relocalizations": res["relocalizations"]}, occupancy=res["occupancy"])
     for name, r in report["robots"].items():
         print(f"  {name}: ATE {r['ate_rmse_m']:.3f} m (odometry {r['odom_ate_rmse_m']:.3f} m), RPE {r['rpe_rmse_m']:.3f} m")
     u = report["update_ms"]

@@ -72,3 +72,30 @@ def test_shipped_config_files_load():
 
     root = Path(__file__).resolve().parents[2] / "config"
     assert load_yaml(MrclamConfig, root / "mrclam.yaml").mode == "joint"
+
+
+def test_the_occupancy_grid_is_written_as_a_ros_map_file_and_plotted(tmp_path):
+    from mrslam_core.exploration.mapfile import FREE, OCCUPIED, UNKNOWN, load_map_file
+
+    prob = np.full((3, 4), 0.5)
+    known = np.zeros((3, 4), bool)
+    prob[0, 0], known[0, 0] = 0.1, True  # free, at the grid's origin (lower left)
+    prob[2, 3], known[2, 3] = 0.9, True  # occupied, top right
+    prob[1, 1], known[1, 1] = 0.5, True  # seen, neither: written unknown as map_saver does
+    t = np.arange(3.0)
+    tr = {"robot1": {"t": t, "est": np.zeros((3, 3)), "gt": None, "odom": None}}
+    occ = {"probability": prob, "known": known, "origin": np.array([-1.0, -2.0]), "resolution": 0.1,
+           "free_thresh": 0.4, "occupied_thresh": 0.65}
+    rep = write_run(tmp_path, tr, FilterConfig(), np.array([1.0]), occupancy=occ)
+    assert rep["occupancy_map"] == "occupancy.yaml" and "occupancy.png" in rep["plots"]
+    pixels, meta = load_map_file(tmp_path / "occupancy.yaml")
+    want = np.full((3, 4), UNKNOWN)
+    want[0, 0], want[2, 3] = FREE, OCCUPIED
+    np.testing.assert_array_equal(pixels, want)
+    assert meta == {"image": "occupancy.pgm", "mode": "trinary", "resolution": 0.1, "origin": [-1.0, -2.0, 0.0],
+                    "negate": 0, "occupied_thresh": 0.65, "free_thresh": 0.4}
+    header = b"P5\n4 3\n255\n"
+    raw = (tmp_path / "occupancy.pgm").read_bytes()
+    assert raw.startswith(header) and len(raw) == len(header) + 12
+    body = raw[len(header):]
+    assert body[3] == OCCUPIED and body[8] == FREE  # the image's first row is the grid's top

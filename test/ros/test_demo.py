@@ -82,3 +82,17 @@ def test_the_run_folder_opens_in_evo(demo_run):
         assert proc.returncode == 0, proc.stderr
         rmse = float(re.search(r"rmse\s+([0-9.eE+-]+)", proc.stdout).group(1))
         assert rmse == pytest.approx(r["ate_rmse_m"], abs=1e-3)
+
+
+def test_the_run_folder_holds_the_occupancy_map_as_a_ros_map_file(demo_run):
+    from mrslam_core.exploration.mapfile import FREE, OCCUPIED, load_map_file
+
+    out, report = demo_run
+    assert report["occupancy_map"] == "occupancy.yaml" and "occupancy.png" in report["plots"]
+    pixels, meta = load_map_file(out / report["occupancy_map"])
+    grid = report["config"]["team"]["grid"]
+    assert meta["resolution"] == pytest.approx(grid["resolution"])
+    assert pixels.shape == (round(grid["size"][1] / grid["resolution"]), round(grid["size"][0] / grid["resolution"]))
+    free_m2 = (pixels == FREE).sum() * grid["resolution"] ** 2
+    # the office has 213 m² of floor a robot can reach; the run explores more than 35 % of it
+    assert free_m2 > 0.25 * 213 and (pixels == OCCUPIED).any()
