@@ -1,5 +1,5 @@
-"""Target assignment: utility discounted near assigned targets (002 eq. 8–9), the best
-(robot, target) pair first (Burgard et al. 2005, Table 1)."""
+"""Target assignment: utility discounted near assigned targets (002 eq. 8–9), the robots in
+turn (002) or the best (robot, target) pair first (Burgard et al. 2005)."""
 
 from __future__ import annotations
 
@@ -8,14 +8,15 @@ import numpy as np
 
 def assign_targets(
     targets_xy: np.ndarray, cost: np.ndarray, beta: float, utility_range: float, coordinated: bool = True,
-    bonus: np.ndarray | None = None,
+    bonus: np.ndarray | None = None, best_pair: bool = False,
 ) -> np.ndarray:
     """Choose one target per robot.
 
-    Coordinated, the pair (robot i, target t) maximising U_t − β·V_t^i over the robots not yet
-    assigned is taken first, then the utility of targets within ``utility_range`` of t is
-    discounted, and so on until every robot has a target or none is reachable. The order of the
-    robots does not matter: the robot nearest a frontier gets it, not the one listed first.
+    Coordinated, robot n takes argmax U(t | t₁…tₙ₋₁) − β·V_t^n after robots 1…n−1 (002 eq. 8,
+    the robots in list order); with ``best_pair``, the pair (robot i, target t) maximising
+    U_t − β·V_t^i over the robots not yet assigned is taken first (Burgard et al. 2005), so the
+    robot nearest a frontier gets it whatever the order. Either way the utility of targets
+    within ``utility_range`` of each assigned one is then discounted (eq. 9).
 
     Args:
         targets_xy: (T, 2) candidate target positions [m].
@@ -45,7 +46,11 @@ def assign_targets(
     open_ = reachable.any(axis=1)
     while open_.any():
         score = np.where(reachable & open_[:, None], utility - beta * np.where(reachable, cost, 0.0) + extra, -np.inf)
-        i, j = np.unravel_index(int(np.argmax(score)), score.shape)
+        if best_pair:
+            i, j = np.unravel_index(int(np.argmax(score)), score.shape)
+        else:
+            i = int(np.flatnonzero(open_)[0])
+            j = int(np.argmax(score[i]))
         chosen[i] = j
         open_[i] = False
         d = np.linalg.norm(targets_xy - targets_xy[j], axis=1)

@@ -178,7 +178,7 @@ class Explorer:
                     d = np.linalg.norm(txy - g.target, axis=1)
                     if d.min() <= KEEP_RADIUS:
                         bonus[i, int(np.argmin(d))] = cfg.keep_goal
-        chosen = assign_targets(txy, far_cost, cfg.beta, cfg.utility_range, cfg.coordinated, bonus)
+        chosen = assign_targets(txy, far_cost, cfg.beta, cfg.utility_range, cfg.coordinated, bonus, cfg.best_pair)
         for i in np.flatnonzero(chosen < 0):  # only near frontiers left: turn and look at them
             if np.isfinite(cost[i]).any():
                 chosen[i] = int(np.argmin(cost[i]))

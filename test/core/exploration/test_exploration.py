@@ -51,12 +51,16 @@ def test_the_best_robot_target_pair_is_assigned_first_whatever_the_robots_order(
     targets = np.array([[0.0, 0.0], [8.0, 0.0]])
     cost = np.array([[1.0, 1.2], [0.1, 3.0]])
     # pair scores U - 0.5 V: (1, 0) 0.95 first; then target 0's utility is 0, robot 0 takes 1 (0.4 > -0.5)
-    assert assign_targets(targets, cost, beta=0.5, utility_range=4.0).tolist() == [1, 0]
-    assert assign_targets(targets, cost[::-1], beta=0.5, utility_range=4.0).tolist() == [0, 1]
+    assert assign_targets(targets, cost, beta=0.5, utility_range=4.0, best_pair=True).tolist() == [1, 0]
+    assert assign_targets(targets, cost[::-1], beta=0.5, utility_range=4.0, best_pair=True).tolist() == [0, 1]
+    # in list order (002 eq. 8) robot 0 takes target 0 (0.5 > 0.4); target 1 then scores -0.5 for
+    # robot 1 and target 0 (utility 0) -0.05: both sent to target 0
+    assert assign_targets(targets, cost, beta=0.5, utility_range=4.0).tolist() == [0, 0]
     # a robot that reaches nothing gets no target; the others are still assigned
     cost3 = np.vstack([cost, np.full(2, np.inf)])
-    assert assign_targets(targets, cost3, beta=0.5, utility_range=4.0).tolist() == [1, 0, -1]
-    assert assign_targets(np.zeros((0, 2)), np.zeros((2, 0)), 0.5, 4.0).tolist() == [-1, -1]
+    for best_pair in (False, True):
+        assert assign_targets(targets, cost3, 0.5, 4.0, best_pair=best_pair)[2] == -1
+        assert assign_targets(np.zeros((0, 2)), np.zeros((2, 0)), 0.5, 4.0, best_pair=best_pair).tolist() == [-1, -1]
 
 
 def test_a_bonus_keeps_a_robots_target_unless_another_is_clearly_better():
