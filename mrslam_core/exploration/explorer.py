@@ -235,9 +235,9 @@ class Explorer:
         self.strikes.append([1.0, now + cfg.blacklist_period])
 
     def _recovery_direction(self, name: str, poses: dict[str, np.ndarray]) -> float:
-        """Back off (−1), unless the last recovery backed off and did not move the robot: then
-        drive forward (+1). A robot whose rear corner touches a wall cannot back off along it
-        (the wheels do not slip), nor turn that corner into the wall; pulling forward frees it."""
+        """Back off (−1), unless the last recovery did not move the robot (< 5 cm): then the other
+        way. A robot whose rear corner touches a wall cannot back off along it (the wheels do not
+        slip), nor turn that corner into the wall; pulling forward frees it."""
         last = self.recovery.get(name)
         if last is None:
             return -1.0

@@ -94,6 +94,20 @@ def test_the_explorer_keeps_a_robots_target_against_a_marginally_better_one():
         assert (ex.goals["robot1"].target[0] > 3.0) == turns, (keep, ex.goals["robot1"].target)
 
 
+def test_a_frontier_cell_inside_an_obstacles_inflation_is_visited_from_the_nearest_passable_cell():
+    from mrslam_core.exploration.frontiers import standing_cells
+
+    passable = np.ones((10, 10), bool)
+    passable[:, 6:] = False  # inflated wall: columns 6-9
+    targets = np.array([[2, 7], [2, 8], [5, 9], [4, 3]])
+    cells = standing_cells(targets, passable, reach_cells=2.5)
+    # (2, 7) -> (2, 5) at 2 cells; (2, 8) -> (2, 5) too (3 cells: beyond reach, left out);
+    # (5, 9) is 4 cells away: left out; (4, 3) stands where it is
+    assert cells.tolist() == [[2, 5], [4, 3]]
+    assert standing_cells(targets, passable, reach_cells=3.0).tolist() == [[2, 5], [4, 3]]  # (2, 8) once
+    assert standing_cells(targets, np.zeros((10, 10), bool), 5.0).shape == (0, 2)
+
+
 def test_frontiers_on_a_known_map():
     known = np.zeros((6, 8), bool)
     known[:, :4] = True
