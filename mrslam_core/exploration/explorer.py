@@ -130,13 +130,14 @@ class Explorer:
         if cfg.target_reach <= 0:
             frontier &= passable  # a frontier the robot cannot stand on (hugging a wall) is not a goal
         waiting = False  # a frontier blocked only for now will be tried again: not complete yet
-        blocked = []  # (x, y) [m] of the blacklist entries in force, and whether for good
+        blocked, for_now = [], []  # blacklist entries in force: (x, y) [m], and whether only for a while
         if self.blacklist:
             centres = grid.centre_of(np.argwhere(frontier))
             bad = np.zeros(len(centres), bool)
             for b, (fails, until) in zip(self.blacklist, self.strikes):
                 if fails >= cfg.max_strikes or now < until:
-                    blocked.append((b, fails >= cfg.max_strikes))
+                    blocked.append(b)
+                    for_now.append(fails < cfg.max_strikes)
                     near = np.linalg.norm(centres - b, axis=1) < cfg.blacklist_radius
                     bad |= near
                     waiting |= fails < cfg.max_strikes and int(near.sum()) >= cfg.min_frontier_cells
@@ -147,9 +148,8 @@ class Explorer:
         if cfg.target_reach > 0 and len(targets):
             targets = standing_cells(targets, passable, cfg.target_reach / grid.res)
             if blocked and len(targets):  # a standing cell may lie off its frontier's blacklisted cells
-                d = np.linalg.norm(grid.centre_of(targets)[:, None] - np.array([b for b, _ in blocked])[None], axis=2)
-                near = d < cfg.blacklist_radius  # (T, B)
-                waiting |= bool(near[:, [not good for _, good in blocked]].any())
+                near = np.linalg.norm(grid.centre_of(targets)[:, None] - np.array(blocked)[None], axis=2) < cfg.blacklist_radius
+                waiting |= bool(near[:, np.array(for_now)].any())  # near: (T, B)
                 targets = targets[~near.any(axis=1)]
         if not len(targets) and free.any() and not waiting:
             if self.state is State.EXPLORING:

@@ -20,6 +20,7 @@ import numpy as np
 from mrslam_core.configio import ConfigError, load_yaml
 from mrslam_core.evaluation.report import write_run
 from mrslam_core.exploration.config import ExplorationConfig, GridConfig
+from mrslam_core.exploration.coverage import explored_fraction
 from mrslam_core.exploration.explorer import Explorer, State
 from mrslam_core.exploration.grid import OccupancyGrid, Scan
 from mrslam_core.frontend.camera import StereoRig
@@ -170,7 +171,7 @@ def run(cfg: TeamConfig, progress: bool = False) -> dict:
     sim.close()
     explored = None
     if truth_free is not None:
-        explored = _explored_fraction(grid, truth_free, cfg.grid.resolution)
+        explored = explored_fraction(grid.observed, grid.origin, grid.res, truth_free, cfg.grid.resolution)
     return {
         "trajectories": trajectories, "update_ms": np.array(mapper.update_ms), "landmarks": {"mean": mean, "cov": cov},
         "dropped": dict(slam.dropped) | dict(mapper.drops), "map_checks": dict(mapper.map_checks),
@@ -188,17 +189,6 @@ def _odom_in_map(start: np.ndarray, odom0: np.ndarray, odom: np.ndarray) -> np.n
     from mrslam_core.geometry.se2 import compose
 
     return compose(start, between(odom0, odom))
-
-
-def _explored_fraction(grid: OccupancyGrid, truth_free: np.ndarray, res: float) -> float:
-    """Share of the world's reachable free cells that the grid knows."""
-    h, w = truth_free.shape
-    yy, xx = np.mgrid[0:h, 0:w]
-    cells = grid.cell_of((np.stack([xx, yy], -1) + 0.5) * res)
-    ok = grid.inside(cells)
-    known = np.zeros((h, w), bool)
-    known[ok] = grid.observed[cells[..., 0][ok], cells[..., 1][ok]]
-    return float((known & truth_free).sum() / max(truth_free.sum(), 1))
 
 
 def main(argv: list[str]) -> int:
