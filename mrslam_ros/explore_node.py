@@ -109,11 +109,14 @@ class ExploreNode(Node):
     def control(self) -> None:
         if len(self.poses) < len(self.cfg.robots):
             return  # every robot must have a pose before targets are shared out
-        stalls, held = self.explorer.stalls, self.explorer.held
+        stalls, held, boxed = self.explorer.stalls, self.explorer.held, self.explorer.boxed_in
         commands = self.explorer.step(self.grid, self.poses, self.now_ns * 1e-9)
         if self.explorer.stalls > stalls:
             self.get_logger().warning(f"a robot stalled (commanded forward, did not move): backing off; "
                                       f"{self.explorer.stalls} stalls so far")
+        if self.explorer.boxed_in > boxed:
+            self.get_logger().warning(f"a robot can reach no frontier from where it stands: recovering; "
+                                      f"{self.explorer.boxed_in} times so far")
         if self.explorer.held > held:
             self.get_logger().info(f"a robot waits for another in its way (keep_clear); {self.explorer.held} "
                                    "commands held so far", throttle_duration_sec=5.0)

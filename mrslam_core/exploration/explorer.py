@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 from enum import Enum
 
 import numpy as np
+from scipy import ndimage
 
 from mrslam_core.exploration.assignment import assign_targets
 from mrslam_core.exploration.config import ExplorationConfig
@@ -63,6 +64,18 @@ def ahead_within(pose: np.ndarray, others: list[np.ndarray], distance: float, di
     return False
 
 
+def reaches_any(passable: np.ndarray, start: tuple[int, int], cells: np.ndarray) -> bool:
+    """Whether any of ``cells`` (T, 2) (row, col) lies in the 8-connected region of ``passable``
+    (H, W) bool that holds ``start`` (row, col); cells off the grid never do."""
+    labels, _ = ndimage.label(passable, structure=np.ones((3, 3), bool))
+    own = labels[start]
+    if own == 0 or not len(cells):
+        return False
+    inside = np.all((cells >= 0) & (cells < np.array(passable.shape)), axis=1)
+    rc = cells[inside]
+    return bool(np.any(labels[rc[:, 0], rc[:, 1]] == own))
+
+
 def planning_layers(grid: OccupancyGrid, poses: list[np.ndarray], cfg: ExplorationConfig,
                     bumps: list[np.ndarray] = ()) -> tuple[np.ndarray, np.ndarray]:
     """What paths may cross: (passable (H, W) bool for A*, occupancy (H, W) for the travel cost).
@@ -114,6 +127,9 @@ class Explorer:
     stalls: int = 0
     #: follower commands held at v = 0 because another robot stood in the way (``keep_clear``)
     held: int = 0
+    #: goals a robot could not plan to because it could reach none of the targets from its spot
+    #: (see :meth:`_set_goal`): it recovered instead of blacklisting the target
+    boxed_in: int = 0
     #: per robot, the time of its first pose [s] (``start_delay``)
     first_seen: dict[str, float] = field(default_factory=dict)
     #: per robot, recent (time [s], x, y, commanded v [m/s]) for the stall check
@@ -156,7 +172,7 @@ class Explorer:
                 self.state = State.RETURNING if cfg.return_to_start else State.COMPLETE
             if self.state is State.RETURNING:
                 for name in self.robots:
-                    self._set_goal(name, self.starts[name][:2], grid, passable, poses, now)
+                    self._set_goal(name, self.starts[name][:2], grid, passable, poses, now, self.starts[name][None, :2])
             return
         if not len(targets):
             return
@@ -186,9 +202,15 @@ class Explorer:
             if j < 0:
                 self.goals[name] = None
             else:
-                self._set_goal(name, txy[j], grid, passable, poses, now)
+                self._set_goal(name, txy[j], grid, passable, poses, now, txy)
 
-    def _set_goal(self, name, target, grid, passable, poses, now) -> None:
+    def _set_goal(self, name, target, grid, passable, poses, now, targets=None) -> None:
+        """Plan ``name``'s path to ``target`` (x, y) [m]. When A* finds none, the target is struck
+        (blacklisted) only if the robot can reach another of ``targets`` (T, 2) [m] (None: always
+        struck). A robot boxed in (by a teammate, by obstacles mapped round it) reaches none, and
+        striking each target it is given would blacklist, one after another, the targets its
+        team can reach; it recovers instead (backs off, or pulls forward after a recovery that
+        did not move it) and asks again."""
         start = tuple(np.clip(grid.cell_of(poses[name][:2]), 0, np.array(grid.shape) - 1))
         goal = tuple(np.clip(grid.cell_of(target), 0, np.array(grid.shape) - 1))
         # a robot standing closer than its radius to an obstacle may leave through inflated
@@ -207,8 +229,12 @@ class Explorer:
         if path is None:
             path = astar(passable | leave, start, goal, cost)
         if path is None:
-            self._strike(np.asarray(target, float), now)
             self.goals[name] = None
+            if targets is None or reaches_any(passable | leave, start, grid.cell_of(np.asarray(targets, float).reshape(-1, 2))):
+                self._strike(np.asarray(target, float), now)
+            else:
+                self.boxed_in += 1
+                self._recover(name, poses, now)
             return
         path_xy = grid.centre_of(np.array(path))
         self.goals[name] = Goal(np.asarray(target, float), path_xy, now)
@@ -233,6 +259,11 @@ class Explorer:
                 return
         self.blacklist.append(np.asarray(target, float))
         self.strikes.append([1.0, now + cfg.blacklist_period])
+
+    def _recover(self, name: str, poses: dict[str, np.ndarray], now: float) -> None:
+        """Drive ``name`` straight for ``recovery_time``, away from where it is stuck."""
+        self.recovering_until[name] = now + self.config.recovery_time
+        self.recovery[name] = (self._recovery_direction(name, poses), np.asarray(poses[name], float)[:2].copy())
 
     def _recovery_direction(self, name: str, poses: dict[str, np.ndarray]) -> float:
         """Back off (−1), unless the last recovery did not move the robot (< 5 cm): then the other
@@ -301,8 +332,7 @@ class Explorer:
                 self._strike(g.target, now)
                 self.goals[name] = None
                 self.checkpoints[name] = (poses[name][:2].copy(), now)
-                self.recovering_until[name] = now + cfg.recovery_time  # back off before the next goal
-                self.recovery[name] = (self._recovery_direction(name, poses), poses[name][:2].copy())
+                self._recover(name, poses, now)  # back off before the next goal
                 due = True
         if due and self.state is not State.COMPLETE:
             grid_ok = grid.observed.any()

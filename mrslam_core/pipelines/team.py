@@ -177,6 +177,7 @@ def run(cfg: TeamConfig, progress: bool = False) -> dict:
         "dropped": dict(slam.dropped) | dict(mapper.drops), "map_checks": dict(mapper.map_checks),
         "relocalizations": mapper.relocalizations, "frontend_drops": {n: dict(f.drops) for n, f in frontends.items()},
         "explored_fraction": explored, "exploration_state": explorer.state.value, "stalls": explorer.stalls, "held": explorer.held,
+        "boxed_in": explorer.boxed_in,
         "wall_s": time.perf_counter() - wall, "outlier_matches": slam.outlier_pairs / slam.num_particles,
         "occupancy": {"probability": grid.probability(), "known": grid.observed.copy(), "origin": grid.origin,
                       "resolution": grid.res, "free_thresh": cfg.grid.free_below,
@@ -213,6 +214,7 @@ def main(argv: list[str]) -> int:
                        extra={"explored_fraction": res["explored_fraction"], "dropped": res["dropped"],
                               "frontend_drops": res["frontend_drops"], "wall_s": res["wall_s"],
                               "exploration_state": res["exploration_state"], "stalls": res["stalls"], "held": res["held"],
+                              "boxed_in": res["boxed_in"],
                               "outlier_matches": res["outlier_matches"], "map_checks": res["map_checks"],
                               "relocalizations": res["relocalizations"]}, occupancy=res["occupancy"])
     for name, r in report["robots"].items():

@@ -285,6 +285,41 @@ def test_a_robot_that_could_not_back_off_pulls_forward_next_time():
     assert recoveries(moves_when_backing=True) == [-1.0, -1.0, -1.0]
 
 
+def test_a_boxed_in_robot_recovers_and_blacklists_no_target():
+    """robot1 at (1.0, 2.0) stands inside a ring of occupied cells 0.45-0.55 m from it (a teammate
+    and obstacles mapped round it), robot2 in the open. A* from robot1 reaches no frontier: it
+    backs off, and neither its target nor any other is blacklisted; robot2 gets a path."""
+    from mrslam_core.exploration.explorer import Explorer
+
+    grid = _open_room()
+    rr, cc = np.mgrid[: grid.shape[0], : grid.shape[1]]
+    ring = np.abs(np.hypot(rr - 20, cc - 10) - 5.0) <= 0.5
+    grid.logodds[ring] = 3.0
+    cfg = ExplorationConfig(robot_radius=0.2, min_target_distance=0.5)
+    ex = Explorer(cfg, ["robot1", "robot2"])
+    poses = {"robot1": np.array([1.05, 2.05, 0.0]), "robot2": np.array([2.5, 3.0, 0.0])}
+    cmds = ex.step(grid, poses, 0.0)
+    assert ex.boxed_in == 1 and ex.blacklist == [] and ex.strikes == []
+    assert ex.goals["robot1"] is None and ex.goals["robot2"].target[0] == pytest.approx(3.95)
+    assert cmds["robot1"] == (-cfg.recovery_speed, 0.0) and cmds["robot2"] != (0.0, 0.0)
+
+
+def test_reaches_any_follows_the_region_that_holds_the_start():
+    """Two rooms split by a wall column: cells on the start's side are reached, the others and
+    cells off the grid are not; a start on a blocked cell reaches nothing."""
+    from mrslam_core.exploration.explorer import reaches_any
+
+    passable = np.ones((5, 7), bool)
+    passable[:, 3] = False
+    assert reaches_any(passable, (2, 0), np.array([[4, 2]]))
+    assert not reaches_any(passable, (2, 0), np.array([[0, 4], [4, 6], [9, 1], [-1, 0]]))
+    assert reaches_any(passable, (2, 0), np.array([[0, 4], [1, 1]]))
+    passable[1, 3] = True  # a one-cell door; diagonal steps count
+    assert reaches_any(passable, (0, 0), np.array([[2, 4]]))
+    assert not reaches_any(passable, (2, 3), np.array([[2, 0]]))
+    assert not reaches_any(passable, (0, 0), np.zeros((0, 2), np.int64))
+
+
 def test_a_robot_that_follows_its_commands_never_stalls():
     from mrslam_core.exploration.explorer import Explorer
 
