@@ -100,7 +100,8 @@ class ExploreNode(Node):
         """Offer a pose (stream 0) or a scan (stream 1); a pose and a scan of one stamp go into the grid."""
         pair = self.scan_sync[robot].add(stream, stamp_ns, item)
         if pair is not None:
-            self.grid.insert(pair[0], laser_to_scan(pair[1]))
+            others = [p[:2] for r, p in self.poses.items() if r != robot]
+            self.grid.insert(pair[0], laser_to_scan(pair[1]), others)
             self.scans_inserted += 1
         # dropped by the synchroniser (overflow, unmatched, late, duplicate) = neither laid nor waiting
         waiting = sum(s.queued()[1] for s in self.scan_sync.values())

@@ -16,6 +16,12 @@ class GridConfig:
         hit, miss: log-odds added for a beam end (obstacle) / a cell a beam passed.
         clamp: log-odds are kept in [-clamp, clamp].
         free_below, occupied_above: probability thresholds of free and occupied cells.
+        teammate_radius: a beam ending within this of another robot's position (base_link, map
+            frame) ended on that robot's body: it proves the space up to it free and marks no
+            obstacle. Robots see each other; mapped, a teammate that drove on leaves an obstacle
+            where no one looks again, and inflated for planning it sealed a start room's door
+            (docs/results.md, session 14). The simulated Pioneer's body reaches 0.33 m from
+            base_link; 0: off [m].
     """
 
     resolution: float = 0.1
@@ -26,6 +32,7 @@ class GridConfig:
     clamp: float = 4.0
     free_below: float = 0.4
     occupied_above: float = 0.65
+    teammate_radius: float = 0.45
 
 
 @dataclass(frozen=True)

@@ -35,6 +35,18 @@ class Scan:
         keep = hit | (ranges > 0)
         return cls(bearings[keep], ranges[keep], hit[keep])
 
+    def without_hits_near(self, pose: np.ndarray, points: np.ndarray, radius: float) -> "Scan":
+        """This scan, taken at ``pose`` (x, y, θ) map frame, with every hit ending within ``radius``
+        [m] of one of ``points`` (K, 2) map frame turned into a free beam of the same range."""
+        points = np.asarray(points, float).reshape(-1, 2)
+        if radius <= 0 or not len(points) or not self.hit.any():
+            return self
+        pose = np.asarray(pose, float)
+        ang = pose[2] + self.bearings
+        end = pose[:2] + self.ranges[:, None] * np.column_stack([np.cos(ang), np.sin(ang)])
+        near = np.linalg.norm(end[:, None] - points[None], axis=2).min(axis=1) < radius
+        return Scan(self.bearings, self.ranges, self.hit & ~near)
+
 
 class OccupancyGrid:
     """Log-odds grid (H, W) float32; probability = 1 / (1 + exp(−log-odds)); 0.5 = unknown."""
@@ -69,12 +81,16 @@ class OccupancyGrid:
     def occupied(self) -> np.ndarray:
         return self.observed & (self.probability() > self.cfg.occupied_above)
 
-    def insert(self, pose: np.ndarray, scan: Scan) -> None:
-        """Trace each beam from the robot: cells passed get ``miss``, the end cell of a hit ``hit``.
+    def insert(self, pose: np.ndarray, scan: Scan, teammates: np.ndarray | None = None) -> None:
+        """Trace each beam from the robot at ``pose`` (x, y, θ) map frame: cells passed get
+        ``miss``, the end cell of a hit ``hit``; hits on ``teammates`` (K, 2) [m], the other
+        robots' positions, mark no obstacle (``teammate_radius``).
 
         Vectorised over beams: points are sampled along every beam at half a cell apart.
         """
         pose = np.asarray(pose, float)
+        if teammates is not None:
+            scan = scan.without_hits_near(pose, teammates, self.cfg.teammate_radius)
         ang = pose[2] + scan.bearings
         steps = np.arange(0.0, float(scan.ranges.max(initial=0.0)), self.res / 2)
         if steps.size == 0:

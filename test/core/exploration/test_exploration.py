@@ -140,6 +140,22 @@ def test_grid_marks_free_and_hits():
     assert not grid.observed[10, 25]
 
 
+def test_a_hit_on_a_teammate_marks_no_obstacle_but_proves_the_space_before_it_free():
+    """Two beams from (0.05, 1.05) along x and y: the one ending 0.4 m from a teammate at
+    (2.45, 1.05) marks nothing occupied, but frees the cells it crossed, exactly as far as the
+    hit; the other, 1.2 m from the teammate, is an obstacle. teammate_radius 0: both are."""
+    beams = Scan(np.array([0.0, np.pi / 2]), np.array([2.0, 0.8]), np.array([True, True]))
+    pose, mate = np.array([0.05, 0.05, 0.0]), np.array([[2.45, 0.05]])
+    grid = OccupancyGrid(GridConfig(resolution=0.1, size=(5.0, 2.0), origin=(0.0, 0.0), teammate_radius=0.45))
+    grid.insert(pose, beams, mate)
+    assert grid.occupied().sum() == 1 and grid.occupied()[8, 0]  # (0.05, 0.85): the y beam's end
+    assert grid.free()[0, 1:20].all() and not grid.observed[0, 20:].any()
+    off = OccupancyGrid(GridConfig(resolution=0.1, size=(5.0, 2.0), origin=(0.0, 0.0), teammate_radius=0.0))
+    off.insert(pose, beams, mate)
+    assert off.occupied()[0, 20] and off.occupied().sum() == 2
+    assert beams.without_hits_near(pose, np.zeros((0, 2)), 0.45) is beams
+
+
 def test_pure_pursuit_turns_towards_the_path():
     v, w, _ = pure_pursuit(np.array([0.0, 0.0, 0.0]), np.array([[0.0, 0.0], [1.0, 1.0]]), 0.5, 0.5, 1.0)
     assert v > 0 and w > 0
