@@ -107,6 +107,12 @@ class ExplorationConfig:
             within it in front of (behind) its axle; it turns on the spot, waits, or is given a
             path around. Two robots whose bodies swing out to ``r`` when turning need more than
             2·r between centres to turn freely (0: off).
+        path_clearance: a robot's path keeps this far [m] from the other robots' positions
+            where there is room (else the plain path is kept), without ``keep_clear``'s holding.
+            The occupancy grid leaves teammates out (``GridConfig.teammate_radius``); without
+            this, paths ran through them: two robots crossing at the start drove into each other
+            and stood wedged for the rest of the run (docs/results.md, session 14). The larger
+            of this and ``keep_clear`` is used; 0: off.
         start_delay: each robot stands still this long from its first pose on, so that the map
             is started from the known start poses: before a robot's first landmarks nothing can
             tell its particles' motion noise apart, and the landmarks it maps first fix the
@@ -144,6 +150,7 @@ class ExplorationConfig:
     bumper_range: float = 0.3
     keep_arc: bool = False
     keep_clear: float = 0.0
+    path_clearance: float = 0.8
     start_delay: float = 0.0
 
     def __post_init__(self) -> None:

@@ -221,11 +221,12 @@ class Explorer:
         others = [np.asarray(poses[o])[:2] for o in self.robots if o != name]
         cost = np.where(grid.observed, 1.0, cfg.unknown_cost) if cfg.unknown_cost > 1 else None
         path = None
-        if cfg.keep_clear > 0 and others:
+        clearance = max(cfg.keep_clear, cfg.path_clearance)
+        if clearance > 0 and others:
             # around the other robots where there is room; else the plain path, on which the
-            # follower waits for a robot in the way (see step)
-            crowd = disc_cells(grid, others, cfg.keep_clear)
-            path = astar((passable & ~crowd) | (leave & ~disc_cells(grid, others, cfg.keep_clear / 2)), start, goal, cost)
+            # follower waits for a robot in the way (keep_clear, see step)
+            crowd = disc_cells(grid, others, clearance)
+            path = astar((passable & ~crowd) | (leave & ~disc_cells(grid, others, clearance / 2)), start, goal, cost)
         if path is None:
             path = astar(passable | leave, start, goal, cost)
         if path is None:

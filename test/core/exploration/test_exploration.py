@@ -348,22 +348,24 @@ def test_a_robot_that_follows_its_commands_never_stalls():
     assert ex.bumps == [] and ex.strikes == [] and pose[0] > 2.0
 
 
-@pytest.mark.parametrize("keep_clear", [0.0, 0.9])
-def test_a_path_keeps_clear_of_another_robot_where_there_is_room(keep_clear):
+@pytest.mark.parametrize(("keep_clear", "path_clearance"), [(0.0, 0.0), (0.9, 0.0), (0.0, 0.9), (0.9, 0.5)])
+def test_a_path_keeps_clear_of_another_robot_where_there_is_room(keep_clear, path_clearance):
     """robot1 at (0.5, 2.0) is sent to the frontier at x = 4 m; robot2 stands at (2.0, 2.0), on
-    the straight line. With ``keep_clear`` the path keeps 0.9 m from robot2's centre (the disc
-    is exact to one cell); without it the path runs through robot2."""
+    the straight line. With ``keep_clear`` or ``path_clearance`` (the larger of them) the path
+    keeps 0.9 m from robot2's centre (the disc is exact to one cell); without either it runs
+    through robot2."""
     from mrslam_core.exploration.explorer import Explorer, planning_layers
 
     grid = _open_room()
-    cfg = ExplorationConfig(robot_radius=0.2, min_target_distance=0.5, keep_clear=keep_clear)
+    cfg = ExplorationConfig(robot_radius=0.2, min_target_distance=0.5, keep_clear=keep_clear,
+                            path_clearance=path_clearance)
     ex = Explorer(cfg, ["robot1", "robot2"])
     poses = {"robot1": np.array([0.5, 2.0, 0.0]), "robot2": np.array([2.0, 2.0, np.pi / 2])}
     passable, _ = planning_layers(grid, list(poses.values()), cfg)
     ex._set_goal("robot1", np.array([3.95, 2.05]), grid, passable, poses, 0.0)
     d = np.linalg.norm(ex.goals["robot1"].path - poses["robot2"][:2], axis=1)
-    if keep_clear:
-        assert d.min() >= keep_clear - grid.res / 2, d.min()
+    if keep_clear or path_clearance:
+        assert d.min() >= 0.9 - grid.res / 2, d.min()
     else:
         assert d.min() < 0.1, d.min()
 
