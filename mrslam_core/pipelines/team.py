@@ -131,7 +131,6 @@ def run(cfg: TeamConfig, progress: bool = False) -> dict:
     for n in names:
         mapper.add_odometry(n, sim.time_ns, odom0[n])
     rec = {n: {"t": [0.0], "est": [starts[i]], "gt": [starts[i]], "odom": [starts[i]]} for i, n in enumerate(names)}
-    latest = {n: starts[i] for i, n in enumerate(names)}  # each robot's newest estimate, map frame
     next_control = 0
     control_ns = int(cfg.control_period * 1e9)
     end_ns = int(cfg.seconds * 1e9)
@@ -155,9 +154,8 @@ def run(cfg: TeamConfig, progress: bool = False) -> dict:
             r["est"].append(done.pose)
             r["gt"].append(sim.ground_truth(n))
             r["odom"].append(_odom_in_map(starts[names.index(n)], odom0[n], done.odom))
-            latest[n] = done.pose
-            if scans.get(n) is not None:
-                grid.insert(done.pose, Scan.from_obstacle_scan(scans[n]), [latest[o][:2] for o in names if o != n])
+            if scans.get(n) is not None:  # the other robots at their newest estimates
+                grid.insert(done.pose, Scan.from_obstacle_scan(scans[n]), [rec[o]["est"][-1][:2] for o in names if o != n])
         if cfg.explore and sim.time_ns >= next_control:
             next_control += control_ns
             poses = {n: slam.estimate().mean[slam.index[n]] for n in names}
