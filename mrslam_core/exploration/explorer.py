@@ -204,13 +204,13 @@ class Explorer:
             else:
                 self._set_goal(name, txy[j], grid, passable, poses, now, txy)
 
-    def _set_goal(self, name, target, grid, passable, poses, now, targets=None) -> None:
+    def _set_goal(self, name, target, grid, passable, poses, now, targets) -> None:
         """Plan ``name``'s path to ``target`` (x, y) [m]. When A* finds none, the target is struck
-        (blacklisted) only if the robot can reach another of ``targets`` (T, 2) [m] (None: always
-        struck). A robot boxed in (by a teammate, by obstacles mapped round it) reaches none, and
-        striking each target it is given would blacklist, one after another, the targets its
-        team can reach; it recovers instead (backs off, or pulls forward after a recovery that
-        did not move it) and asks again."""
+        (blacklisted) only if the robot can reach another of ``targets`` (T, 2) [m]. A robot
+        boxed in (by a teammate, by obstacles mapped round it) reaches none, and striking each
+        target it is given would blacklist, one after another, the targets its team can reach;
+        it recovers instead (backs off, or pulls forward after a recovery that did not move it)
+        and asks again."""
         start = tuple(np.clip(grid.cell_of(poses[name][:2]), 0, np.array(grid.shape) - 1))
         goal = tuple(np.clip(grid.cell_of(target), 0, np.array(grid.shape) - 1))
         # a robot standing closer than its radius to an obstacle may leave through inflated
@@ -231,7 +231,7 @@ class Explorer:
             path = astar(passable | leave, start, goal, cost)
         if path is None:
             self.goals[name] = None
-            if targets is None or reaches_any(passable | leave, start, grid.cell_of(np.asarray(targets, float).reshape(-1, 2))):
+            if reaches_any(passable | leave, start, grid.cell_of(np.asarray(targets, float).reshape(-1, 2))):
                 self._strike(np.asarray(target, float), now)
             else:
                 self.boxed_in += 1

@@ -362,7 +362,7 @@ def test_a_path_keeps_clear_of_another_robot_where_there_is_room(keep_clear, pat
     ex = Explorer(cfg, ["robot1", "robot2"])
     poses = {"robot1": np.array([0.5, 2.0, 0.0]), "robot2": np.array([2.0, 2.0, np.pi / 2])}
     passable, _ = planning_layers(grid, list(poses.values()), cfg)
-    ex._set_goal("robot1", np.array([3.95, 2.05]), grid, passable, poses, 0.0)
+    ex._set_goal("robot1", np.array([3.95, 2.05]), grid, passable, poses, 0.0, np.array([[3.95, 2.05]]))
     d = np.linalg.norm(ex.goals["robot1"].path - poses["robot2"][:2], axis=1)
     if keep_clear or path_clearance:
         assert d.min() >= 0.9 - grid.res / 2, d.min()
@@ -382,7 +382,7 @@ def test_a_path_through_another_robot_is_kept_when_there_is_no_room_around_it():
     ex = Explorer(cfg, ["robot1", "robot2"])
     poses = {"robot1": np.array([0.5, 2.0, 0.0]), "robot2": np.array([2.0, 2.0, 0.0])}
     passable, _ = planning_layers(grid, list(poses.values()), cfg)
-    ex._set_goal("robot1", np.array([5.0, 2.0]), grid, passable, poses, 0.0)
+    ex._set_goal("robot1", np.array([5.0, 2.0]), grid, passable, poses, 0.0, np.array([[5.0, 2.0]]))
     assert ex.goals["robot1"] is not None and ex.strikes == []
 
 
