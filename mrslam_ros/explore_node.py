@@ -110,7 +110,7 @@ class ExploreNode(Node):
     def control(self) -> None:
         if len(self.poses) < len(self.cfg.robots):
             return  # every robot must have a pose before targets are shared out
-        stalls, held, boxed = self.explorer.stalls, self.explorer.held, self.explorer.boxed_in
+        stalls, held, boxed, long = self.explorer.stalls, self.explorer.held, self.explorer.boxed_in, self.explorer.long_turns
         commands = self.explorer.step(self.grid, self.poses, self.now_ns * 1e-9)
         if self.explorer.stalls > stalls:
             self.get_logger().warning(f"a robot stalled (commanded forward, did not move): backing off; "
@@ -118,6 +118,9 @@ class ExploreNode(Node):
         if self.explorer.boxed_in > boxed:
             self.get_logger().warning(f"a robot can reach no frontier from where it stands: recovering; "
                                       f"{self.explorer.boxed_in} times so far")
+        if self.explorer.long_turns > long:
+            self.get_logger().info(f"a robot turns the long way round, away from a wall (open_side_turns); "
+                                   f"{self.explorer.long_turns} such turns so far")
         if self.explorer.held > held:
             self.get_logger().info(f"a robot waits for another in its way (keep_clear); {self.explorer.held} "
                                    "commands held so far", throttle_duration_sec=5.0)

@@ -99,8 +99,9 @@ class ExplorationConfig:
         bumper_range: distance from the robot's centre to the front of its body [m].
         keep_arc: where the pure-pursuit arc is tighter than ``max_speed / max_turn_rate``,
             slow down to drive it instead of clipping the turn rate and swinging wide (see
-            :func:`~mrslam_core.exploration.planning.pure_pursuit`; measured in docs/results.md,
-            session 8: fewer collisions with door frames, less area explored).
+            :func:`~mrslam_core.exploration.planning.pure_pursuit`; measured in docs/results.md:
+            session 8, fewer collisions with door frames but less area explored; session 15, on
+            in the team defaults: more explored and no robot lost over 9 fresh seeds).
         keep_clear: distance [m] between robot centres (base_link) that robots keep from each
             other: a robot's path keeps this far from the other robots' positions where there is
             room, and a robot does not drive forward (backward) while another robot's centre is
@@ -115,6 +116,11 @@ class ExplorationConfig:
             there at 0.8 m over 14 fresh closed-loop seeds: no wedge and more explored (65
             against 56 %), but more robots above 0.10 m (9 of 42 against 4 of 42), so off.
             The larger of this and ``keep_clear`` is used; 0: off.
+        open_side_turns: a turn on the spot of more than 120° goes the long way round when
+            the short way sweeps the robot's heading past an occupied cell nearer than 0.6 m
+            and the long way does not come as near (0.2 m further or more): a stereo camera
+            facing a wall nearer than its near limit sees nothing, and a robot that turns blind
+            by 100-200° beside a wall loses 3-5° of heading (docs/results.md, session 15).
         start_delay: each robot stands still this long from its first pose on, so that the map
             is started from the known start poses: before a robot's first landmarks nothing can
             tell its particles' motion noise apart, and the landmarks it maps first fix the
@@ -153,6 +159,7 @@ class ExplorationConfig:
     keep_arc: bool = False
     keep_clear: float = 0.0
     path_clearance: float = 0.0
+    open_side_turns: bool = False
     start_delay: float = 0.0
 
     def __post_init__(self) -> None:

@@ -14,8 +14,13 @@ from mrslam_core.exploration.config import ExplorationConfig
 from mrslam_core.exploration.cost import travel_cost
 from mrslam_core.exploration.frontiers import frontier_cells, frontier_groups, frontier_targets, standing_cells
 from mrslam_core.exploration.grid import OccupancyGrid
-from mrslam_core.exploration.planning import astar, inflate, pure_pursuit
+from mrslam_core.exploration.planning import astar, inflate, pure_pursuit, sweep_clearance
 
+
+#: ``open_side_turns``: turns on the spot larger than this [rad] may go the long way round, when the
+#: short way sweeps the heading past an occupied cell nearer than ``OPEN_SIDE_NEAR`` [m] and the long
+#: way keeps ``OPEN_SIDE_GAIN`` [m] further from any
+OPEN_SIDE_TURN, OPEN_SIDE_NEAR, OPEN_SIDE_GAIN = np.radians(120.0), 0.6, 0.2
 
 #: candidate targets within this of a robot's current target count as that target (``keep_goal``);
 #: the candidates along a frontier are 1 m apart [m]
@@ -134,6 +139,10 @@ class Explorer:
     first_seen: dict[str, float] = field(default_factory=dict)
     #: per robot, recent (time [s], x, y, commanded v [m/s]) for the stall check
     motion: dict[str, deque] = field(default_factory=dict)
+    #: per robot turning on the spot the long way round (``open_side_turns``): its turn direction
+    spin: dict[str, float] = field(default_factory=dict)
+    #: turns on the spot sent the long way round (``open_side_turns``)
+    long_turns: int = 0
 
     def _replan(self, grid: OccupancyGrid, poses: dict[str, np.ndarray], now: float) -> None:
         cfg = self.config
@@ -203,6 +212,30 @@ class Explorer:
                 self.goals[name] = None
             else:
                 self._set_goal(name, txy[j], grid, passable, poses, now, txy)
+
+    def _turn_side(self, name: str, grid: OccupancyGrid, pose: np.ndarray, aim: np.ndarray, v: float, w: float) -> float:
+        """The turn rate of a robot turning on the spot (v = 0) towards ``aim`` (x, y) [m]: the
+        long way round when the short way sweeps its heading past an occupied cell (see
+        ``open_side_turns``); a turn once sent the long way keeps its direction until it ends."""
+        if v != 0.0 or w == 0.0:
+            self.spin.pop(name, None)
+            return w
+        bearing = float(np.arctan2(aim[1] - pose[1], aim[0] - pose[0]) - pose[2])
+        bearing = float((bearing + np.pi) % (2 * np.pi) - np.pi)
+        rate = self.config.max_turn_rate
+        if name not in self.spin:
+            if abs(bearing) <= OPEN_SIDE_TURN:
+                return w
+            occupied = grid.occupied()
+            short = sweep_clearance(occupied, grid.origin, grid.res, pose, bearing, 1.0)
+            long = sweep_clearance(occupied, grid.origin, grid.res, pose, bearing - np.sign(bearing) * 2 * np.pi, 1.0)
+            if short >= OPEN_SIDE_NEAR or long < short + OPEN_SIDE_GAIN:
+                return w
+            self.spin[name] = -float(np.sign(bearing))
+            self.long_turns += 1
+        direction = self.spin[name]
+        left = bearing if np.sign(bearing) == direction else bearing + direction * 2 * np.pi
+        return float(direction * min(rate, 2.0 * abs(left)))
 
     def _set_goal(self, name, target, grid, passable, poses, now, targets) -> None:
         """Plan ``name``'s path to ``target`` (x, y) [m]. When A* finds none, the target is struck
@@ -344,11 +377,15 @@ class Explorer:
             g = self.goals.get(name)
             if now < self.recovering_until.get(name, -np.inf) and self.state is not State.COMPLETE:
                 commands[name] = (self.recovery.get(name, (-1.0, None))[0] * cfg.recovery_speed, 0.0)
+                self.spin.pop(name, None)
                 continue
             if g is None or self.state is State.COMPLETE or now - self.first_seen[name] < cfg.start_delay:
                 commands[name] = (0.0, 0.0)
+                self.spin.pop(name, None)
                 continue
-            v, w, _ = pure_pursuit(poses[name], g.path, cfg.lookahead, cfg.max_speed, cfg.max_turn_rate, cfg.keep_arc)
+            v, w, idx = pure_pursuit(poses[name], g.path, cfg.lookahead, cfg.max_speed, cfg.max_turn_rate, cfg.keep_arc)
+            if cfg.open_side_turns:
+                w = self._turn_side(name, grid, np.asarray(poses[name], float), g.path[idx], v, w)
             commands[name] = (v, w)
         for name, (v, w) in commands.items():
             if v != 0.0 and self._robot_ahead(name, poses, np.sign(v)):

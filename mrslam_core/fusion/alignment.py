@@ -164,12 +164,25 @@ def apply_transform(transform: np.ndarray, pts: np.ndarray) -> np.ndarray:
 
 
 def explained(transform: np.ndarray, target: LandmarkMap, source: LandmarkMap, matches: np.ndarray,
-              distance: float) -> np.ndarray:
+              distance: float, gate: float = 0.0, floor: float = 0.0) -> np.ndarray:
     """(P,) bool: the descriptor ``matches`` (P, 2) (target row, source row) whose source landmark,
-    moved by ``transform`` (3,), lands within ``distance`` [m] of its target landmark (planar)."""
+    moved by ``transform`` (3,), lands within ``distance`` [m] of its target landmark (planar).
+
+    With ``gate`` > 0 the test is instead the planar Mahalanobis distance
+    rᵀ(R Σ_src Rᵀ + Σ_tgt + floor² I)⁻¹r <= ``gate`` (a chi-square quantile, 2 dof), r the
+    residual [m], so a pose a few degrees off stops explaining a stereo point 2 m away whose
+    lateral error is a few cm, where a 0.3 m distance still counts it.
+    """
     matches = np.asarray(matches, np.int64).reshape(-1, 2)
     moved = apply_transform(transform, source.means[matches[:, 1], :2])
-    return np.linalg.norm(moved - target.means[matches[:, 0], :2], axis=1) <= distance
+    res = moved - target.means[matches[:, 0], :2]
+    if gate <= 0:
+        return np.linalg.norm(res, axis=1) <= distance
+    c, s = np.cos(transform[2]), np.sin(transform[2])
+    rot = np.array([[c, -s], [s, c]])
+    cov = (target.covs[matches[:, 0], :2, :2] + rot @ source.covs[matches[:, 1], :2, :2] @ rot.T
+           + floor**2 * np.eye(2))
+    return np.einsum("ni,ni->n", res, np.linalg.solve(cov, res[..., None])[..., 0]) <= gate
 
 
 def match_descriptors(

@@ -325,6 +325,7 @@ def join_filters(
         mean, cov = move_landmarks(t_all, mean.astype(float), cov.astype(float), extra_variance, lm_cov)
         slot_map[rest] = central.insert_landmarks(mean, cov, ex, ls_store.descriptor[rest], cnt)
         cs_store.origin[slot_map[rest]] = ls_store.origin[rest]  # the creating track ids
+        cs_store.maker[slot_map[rest]] = central.index[name]
     if not config.carry_landmarks:
         return JoinResult(name, t.copy(), 0, 0, int(rest.size + len(pairs)) + dropped,
                           np.column_stack([anc_c, anc_l]), slot_map, t_all)

@@ -59,16 +59,29 @@ class MapCheckConfig:
         age: only landmarks created at least this long before the check take part [s].
         min_inliers: fewest RANSAC inliers of a fit that may move the robot.
         min_gain: a fit that disagrees must explain at least this many more of the window's
-            descriptor matches (within the fusion's inlier distance) than the robot's estimate
-            does; otherwise the two are look-alikes of each other and the check is ``ambiguous``.
-            Recorded demos d1–d3: moves that fixed a heading gained 9–35 inliers; a move
-            onto a fit 16° off gained 1, one onto a fit 0.8 m off gained 7.
+            descriptor matches (counted as ``gain_gate`` says) than the robot's estimate does;
+            otherwise the two are look-alikes of each other and the check is ``ambiguous``.
+            Recorded demos d1–d3 (counted within 0.3 m): moves that fixed a heading gained 9–35
+            inliers; a move onto a fit 16° off gained 1, one onto a fit 0.8 m off gained 7.
         shift: a fit closer than this to the estimate, and within ``turn``, agrees with it [m].
-        turn: see ``shift`` [rad].
+        turn: see ``shift`` [rad]. 2.5°: under ``gain_gate`` an estimate 2.5–5° off explains
+            far fewer matches than its fit and is corrected (counted within 0.3 m it explained
+            about as many, and 2.5° moved no robot more than 5° did; docs/results.md, sessions
+            14–15).
         max_shift: a fit further than this from the estimate is not used [m].
         max_turn: a fit turned more than this from the estimate is not used [rad].
         sigma_xy: standard deviation added to the fit's own, per axis, when the poses are drawn [m].
         sigma_theta: the same for the heading [rad].
+        gain_gate: how ``min_gain`` counts the matches a pose explains: 0, within the fusion's
+            ``inlier_distance`` (the fit's RANSAC inliers against the estimate's); > 0, within
+            this chi-square (2 dof) gate of the planar Mahalanobis distance under both points'
+            covariances plus ``sigma_xy`` (the fit's and the estimate's counted alike). 9.21
+            (chi-square 0.99): a robot 5° off explains no stereo point 2 m away, which a 0.3 m
+            distance still counts (recorded demo d1, robot3 5.3° off: within 0.3 m its estimate
+            explained 10 matches against the fit's 18, under the gate 1 against 21).
+        distrust_moved: when a check moves a robot, the landmarks it made since its last
+            agreeing check (all of them, if it never had one) were mapped from the wrong pose;
+            later checks leave them out of the older map, so no robot is moved onto them.
         poses: what moves the window's sets into the current base_link: ``estimate``, the
             robot's filtered poses (their 2 s heading change errs 0.1–0.2° at the median, 1–5° at
             p95 in recorded runs; a robot that lost its heading still tracks its own new
@@ -81,12 +94,14 @@ class MapCheckConfig:
     min_inliers: int = 10
     min_gain: int = 8
     shift: float = 0.3
-    turn: float = 0.087
+    turn: float = 0.044
     max_shift: float = 1.0
     max_turn: float = 0.5
     sigma_xy: float = 0.03
     sigma_theta: float = 0.015
     poses: Literal["estimate", "odometry"] = "estimate"
+    gain_gate: float = 9.21
+    distrust_moved: bool = True
 
 
 @dataclass(frozen=True)
@@ -230,6 +245,11 @@ class CentralMapper:
         self._checked: dict[str, int] = {}
         #: each robot's last disagreeing fit, waiting for the next check: (stamp_ns, pose, fit (3,))
         self._pending: dict[str, tuple[int, np.ndarray, np.ndarray]] = {}
+        #: each robot's last agreeing map check [ns]
+        self._agreed: dict[str, int] = {}
+        #: (robot index, from_ns, to_ns): landmarks that robot made in that time, left out of map
+        #: checks (``map_check.distrust_moved``)
+        self._distrusted: list[tuple[int, int, int]] = []
         #: every odometry reset (a restarted robot): robot, stamp_ns, jump_m, turn_rad
         self.restarts: list[dict] = []
         self.drops: Counter[str] = Counter()
@@ -286,7 +306,8 @@ class CentralMapper:
         self.restarts.append({"robot": robot, "stamp_ns": stamp_ns, "jump_m": jump, "turn_rad": turn})
         self.drops["odometry_reset"] += 1
         self._odom[robot].clear()
-        for state in (self._last, self._returning, self._reloc_tried, self._sighted, self._checked, self._pending):
+        for state in (self._last, self._returning, self._reloc_tried, self._sighted, self._checked, self._pending,
+                      self._agreed):
             state.pop(robot, None)
         self._recent[robot].clear()
         self.local[robot] = self._local_filter(robot)
@@ -552,13 +573,17 @@ class CentralMapper:
         turn = float(wrap_angle(al.transform[2] - est[2]))
         if shift <= mc.shift and abs(turn) <= mc.turn:
             self.map_checks["agreed"] += 1
+            self._agreed[obs.robot] = int(obs.stamp_ns)
             self._pending.pop(obs.robot, None)
             return
         if shift > mc.max_shift or abs(turn) > mc.max_turn:
             self.map_checks["too_far"] += 1
             return
-        support = int(explained(est, world, frame, al.matches, self.cfg.fusion.inlier_distance).sum())
-        if len(al.inliers) - support < mc.min_gain:
+        dist = self.cfg.fusion.inlier_distance
+        support = int(explained(est, world, frame, al.matches, dist, mc.gain_gate, mc.sigma_xy).sum())
+        fit_support = (int(explained(al.transform, world, frame, al.matches, dist, mc.gain_gate, mc.sigma_xy).sum())
+                       if mc.gain_gate > 0 else len(al.inliers))
+        if fit_support - support < mc.min_gain:
             self.map_checks["ambiguous"] += 1
             self._pending.pop(obs.robot, None)
             return
@@ -576,9 +601,11 @@ class CentralMapper:
             return
         del self._pending[obs.robot]
         self.map_checks["moved"] += 1
+        if mc.distrust_moved:
+            self._distrusted.append((k, self._agreed.get(obs.robot, -1), int(obs.stamp_ns)))
         self.relocalizations.append({"robot": obs.robot, "stamp_ns": int(obs.stamp_ns), "cause": "map_check",
                                      "accepted": True, "reason": "", "inliers": int(len(al.inliers)),
-                                     "estimate_inliers": support,
+                                     "estimate_inliers": support, "fit_support": fit_support,
                                      "shift_m": shift, "turn_rad": turn,
                                      "transform": [float(v) for v in al.transform]})
         self._redraw(obs.robot, al.transform, al.cov, (mc.sigma_xy, mc.sigma_theta), int(obs.stamp_ns))
@@ -594,6 +621,10 @@ class CentralMapper:
         keep = np.linalg.norm(world.means[:, :2] - pose[:2], axis=1) <= reach
         if born_before is not None:
             keep &= self.slam.landmarks.born[world.ids] < born_before
+        if self._distrusted:
+            maker, born = self.slam.landmarks.maker[world.ids], self.slam.landmarks.born[world.ids]
+            for k, t0, t1 in self._distrusted:
+                keep &= ~((maker == k) & (born >= t0) & (born <= t1))
         return world.subset(np.flatnonzero(keep))
 
     def _redraw(self, robot: str, fit: np.ndarray, cov: np.ndarray, floor: tuple[float, float],
@@ -669,7 +700,8 @@ class CentralMapper:
             "latest_obs": self._latest_obs, "sighted": self._sighted, "first_ns": self._first_ns, "now_ns": self.now_ns,
             "seq": self._seq, "drops": dict(self.drops), "unmerged": sorted(self.local), "restarts": self.restarts,
             "queue": [[o.robot, o.stamp_ns] for _, _, _, o in sorted(self._queue, key=lambda e: e[:3])],
-            "checked": self._checked, "map_checks": dict(self.map_checks),
+            "checked": self._checked, "map_checks": dict(self.map_checks), "agreed": self._agreed,
+            "distrusted": [list(d) for d in self._distrusted],
             "pending": {r: [s, *map(float, at), *map(float, fit)] for r, (s, at, fit) in self._pending.items()},
             "recent": [[r, s, *map(float, at)] for r in self.robots for s, at, _ in self._recent[r]],
         }, "update_ms": np.asarray(self.update_ms, float)}
@@ -721,6 +753,8 @@ class CentralMapper:
                                                    extra[f"queue_desc_{i}"], extra[f"queue_tracks_{i}"]))
         mapper.now_ns, mapper._seq = int(state["now_ns"]), int(state["seq"])
         mapper._checked = {r: int(v) for r, v in state.get("checked", {}).items()}
+        mapper._agreed = {r: int(v) for r, v in state.get("agreed", {}).items()}
+        mapper._distrusted = [tuple(int(x) for x in d) for d in state.get("distrusted", [])]
         mapper.map_checks = Counter(state.get("map_checks", {}))
         mapper._pending = {r: (int(v[0]), np.array(v[1:4], float), np.array(v[4:7], float))
                            for r, v in state.get("pending", {}).items()}

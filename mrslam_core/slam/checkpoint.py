@@ -45,7 +45,7 @@ FILTER_ARRAYS = ("poses", "log_w", "score")
 #: ``pool_*``) is saved up to its last chunk in use: chunk ids stay the same after a reload, and
 #: free chunks hold nothing that is ever read (a chunk is overwritten whenever it is taken).
 POOL_ARRAYS = ("refcount", "pool_mean", "pool_cov", "pool_exists", "pool_count", "pool_score")
-STORE_ARRAYS = ("table",) + POOL_ARRAYS + ("descriptor", "ref", "origin", "born")
+STORE_ARRAYS = ("table",) + POOL_ARRAYS + ("descriptor", "ref", "origin", "born", "maker")
 #: Filter attributes saved or rebuilt one by one. Every other attribute of the filter (its
 #: counters, flags and per-robot arrays) is saved by type (see :func:`_other_state`): scalars in
 #: the header's ``attributes``, arrays as ``attr.<name>``, ``{int: array}`` dicts as
@@ -330,8 +330,8 @@ def _rebuild_store(path, meta: dict[str, Any], arrays: dict[str, np.ndarray], m:
     dim, chunk = int(meta["dim"]), int(meta["chunk"])
     store = LandmarkStore(m, dim, int(meta["descriptor_dim"]), 1, chunk)
     for name in STORE_ARRAYS:
-        if name == "born" and "store.born" not in arrays:  # written before landmarks had birth stamps
-            store.born = np.full(store.descriptor.shape[0], -1, np.int64)
+        if name in ("born", "maker") and f"store.{name}" not in arrays:  # written before landmarks had them
+            setattr(store, name, np.full(store.descriptor.shape[0], -1, np.int64))
             continue
         setattr(store, name, np.array(arrays[f"store.{name}"]))
     store.size = int(meta["size"])
@@ -346,8 +346,8 @@ def _rebuild_store(path, meta: dict[str, Any], arrays: dict[str, np.ndarray], m:
         (all(getattr(store, f"pool_{f}").shape == (pool, chunk) for f in ("exists", "count", "score")),
          "pool exists/count/score shape"),
         (store.descriptor.shape == (cap, store.descriptor_dim), "descriptor shape"),
-        (store.ref.shape == (cap, dim) and store.origin.shape == (cap,) and store.born.shape == (cap,),
-         "ref/origin/born shape"),
+        (store.ref.shape == (cap, dim) and all(getattr(store, a).shape == (cap,) for a in ("origin", "born", "maker")),
+         "ref/origin/born/maker shape"),
         (0 <= store.size <= cap, "size exceeds capacity"),
         (np.array_equal(np.bincount(store.table.ravel(), minlength=pool), store.refcount), "refcount != table"),
     ]

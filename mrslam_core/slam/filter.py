@@ -445,7 +445,7 @@ class MultiRobotFastSLAM:
             self._update_existence(poses, mean_pose, radius, mi, vslots[pair[mi, bi]] if mi.size else mi)
 
         log_l += (~assoc * log_p0[None]).sum(axis=1)
-        created, new_slots = self._create(poses, z, r, desc, tracks, ~assoc & ~rejected, obs.stamp_ns)
+        created, new_slots = self._create(poses, z, r, desc, tracks, ~assoc & ~rejected, obs.stamp_ns, k)
         if memory is not None:
             kept = np.full((m, b), -1, np.int64)
             if mi.size:
@@ -737,7 +737,7 @@ class MultiRobotFastSLAM:
 
     def _create(
         self, poses: np.ndarray, z: np.ndarray, r: np.ndarray, desc: np.ndarray, tracks: np.ndarray,
-        new: np.ndarray, stamp_ns: int,
+        new: np.ndarray, stamp_ns: int, maker: int = -1,
     ) -> tuple[int, np.ndarray]:
         """New landmarks for observations that were not associated: one slot per observation.
 
@@ -751,6 +751,7 @@ class MultiRobotFastSLAM:
         slots = store.allocate(cols.size, desc[cols])
         store.origin[slots] = tracks[cols]
         store.born[slots] = stamp_ns
+        store.maker[slots] = maker
         mi, j = np.nonzero(new[:, cols])
         bi = cols[j]
         lm, cov = self.model.new_landmark(poses[mi], z[bi], r[bi])

@@ -48,6 +48,7 @@ class LandmarkStore:
         ref: (cap, dim) reference position of each slot for the spatial index [m] (inf: none).
         origin: (cap,) track id of the observation that created each slot (-1: unknown).
         born: (cap,) stamp of the update that created each slot [ns] (-1: unknown, e.g. a joined map).
+        maker: (cap,) index of the robot whose observation created each slot (-1: unknown).
         size: slots in use (0..size-1).
     """
 
@@ -70,6 +71,7 @@ class LandmarkStore:
         self.ref = np.full((cap, dim), np.inf)
         self.origin = np.full(cap, -1, np.int64)
         self.born = np.full(cap, -1, np.int64)
+        self.maker = np.full(cap, -1, np.int64)
         self._tree: cKDTree | None = None
         self._live = np.zeros(0, np.int64)
         self._dtree: cKDTree | None = None
@@ -155,7 +157,9 @@ class LandmarkStore:
             origin[: self.origin.size] = self.origin
             born = np.full(cap, -1, np.int64)
             born[: self.born.size] = self.born
-            self.descriptor, self.ref, self.origin, self.born = desc, ref, origin, born
+            maker = np.full(cap, -1, np.int64)
+            maker[: self.maker.size] = self.maker
+            self.descriptor, self.ref, self.origin, self.born, self.maker = desc, ref, origin, born, maker
         cols_needed = -(-self.size // self.chunk)
         if cols_needed > self.columns:
             add = cols_needed - self.columns
@@ -337,6 +341,7 @@ class LandmarkStore:
         self.ref[: live.size] = self.ref[live]
         self.origin[: live.size] = self.origin[live]
         self.born[: live.size] = self.born[live]
+        self.maker[: live.size] = self.maker[live]
         self.ref[live.size : self.size] = np.inf
         self.size = live.size
         self._tree = None

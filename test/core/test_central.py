@@ -502,11 +502,40 @@ def test_a_fit_that_explains_little_more_than_the_estimate_moves_nothing():
     """The slip's fit has 54 inliers where the turned estimate explains 6 of the same matches
     (recorded in the move); asking for a gain above 48 leaves the robot turned, every
     disagreeing check counted as ambiguous."""
-    m, _ = _slip_run(every=1.0, age=3.0)
+    m, _ = _slip_run(every=1.0, age=3.0, gain_gate=0.0)
     (e,) = m.relocalizations
     assert (e["inliers"], e["estimate_inliers"]) == (54, 6), e
-    m, pose = _slip_run(every=1.0, age=3.0, min_gain=49)
+    m, pose = _slip_run(every=1.0, age=3.0, gain_gate=0.0, min_gain=49)
     assert m.relocalizations == [] and m.map_checks["ambiguous"] >= 2 and abs(pose[2] - 0.15) > 0.1, m.map_checks
+
+
+def test_with_the_gain_gate_the_matches_are_counted_under_the_point_covariances():
+    """Under the points' covariances the turned estimate explains none of the 54 matches the fit
+    explains; within 0.3 m it explained 6 (the points near the robot, where 8.6° is a few cm)."""
+    m, pose = _slip_run(every=1.0, age=3.0, gain_gate=9.21)
+    (e,) = m.relocalizations
+    assert (e["fit_support"], e["estimate_inliers"]) == (54, 0), e
+    assert abs(pose[2] - 0.15) < 0.01, pose
+
+
+def test_landmarks_mapped_before_a_move_are_left_out_of_later_checks():
+    """The check at 12 s agreed (no set since the slip had reached it); the move at 14 s says the
+    robot's landmarks born from 12 to 14 s were mapped turned by 8.6°: later checks leave those
+    56 slots out, and the one check that the turned landmarks made ambiguous agrees instead."""
+    m, _ = _slip_run(every=1.0, age=3.0, distrust_moved=False)
+    assert m.map_checks["ambiguous"] == 1 and m._distrusted == []
+    from mrslam_core.fusion.maps import LandmarkMap
+
+    m, pose = _slip_run(every=1.0, age=3.0, distrust_moved=True)
+    assert m._distrusted == [(0, 12 * S, 14 * S)]
+    assert m.map_checks["ambiguous"] == 0 and m.map_checks["moved"] == 1 and abs(pose[2] - 0.15) < 0.01, m.map_checks
+    store = m.slam.landmarks
+    mine = (store.maker[: store.size] == 0) & (store.born[: store.size] >= 12 * S) & (store.born[: store.size] <= 14 * S)
+    assert mine.sum() == 56
+    everything = LandmarkMap.from_filter(m.slam).ids
+    near = m._map_near(pose, np.array([[3.0, 0.0, 0.0]]), 10.0)  # reaches every landmark
+    assert np.isin(everything, np.flatnonzero(mine)).sum() > 0
+    assert sorted(near.ids.tolist()) == sorted(set(everything.tolist()) - set(np.flatnonzero(mine).tolist()))
 
 
 def test_a_mapper_resumed_between_two_map_checks_continues_exactly(tmp_path):

@@ -70,6 +70,16 @@ def _state(slam):
     return (slam.poses.copy(), slam.log_w.copy(), slam.landmarks.size, slam.landmarks.table.copy())
 
 
+def test_every_landmark_records_the_robot_and_the_stamp_that_made_it():
+    slam = MultiRobotFastSLAM(FilterConfig(num_particles=5, seed=0), ["a", "b"], np.zeros((2, 3)))
+    d = np.eye(4, dtype=np.float32)
+    slam.step([RobotUpdate("a", 10, np.zeros(3), _obs("a", 10, [[2.0, 0.0, 1.0]], desc=d[:1]))])
+    slam.step([RobotUpdate("b", 20, np.zeros(3), _obs("b", 20, [[-3.0, 0.0, 1.0], [0.0, 4.0, 1.0]], desc=d[1:3]))])
+    store = slam.landmarks
+    assert store.size == 3
+    assert store.maker[:3].tolist() == [0, 1, 1] and store.born[:3].tolist() == [10, 20, 20]
+
+
 def test_bad_input_is_dropped_and_counted_without_corrupting_state():
     slam = MultiRobotFastSLAM(FilterConfig(num_particles=10), ["a", "b"], np.zeros((2, 3)))
     slam.step([RobotUpdate("a", 1, np.zeros(3), _obs("a", 1, [[2.0, 0.0, 1.0]]))])

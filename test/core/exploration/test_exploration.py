@@ -455,3 +455,52 @@ def test_a_robot_is_not_sent_to_the_unseen_ground_around_a_teammate(avoid_others
     ex.step(grid, poses, 0.0)
     d = float(np.linalg.norm(ex.goals["robot1"].target - poses["robot2"][:2]))
     assert (d >= 1.0) == avoid_others, d
+
+
+def _wall_south() -> OccupancyGrid:
+    """6 m × 4 m observed free, with a wall in the cells y 0.6–0.7 m along the whole width."""
+    grid = OccupancyGrid(GridConfig(resolution=0.1, size=(6.0, 4.0), origin=(0.0, 0.0)))
+    grid.observed[:] = True
+    grid.logodds[:] = -3.0
+    grid.logodds[6, :] = 3.0
+    return grid
+
+
+def test_sweep_clearance_is_the_nearest_occupied_cell_the_turn_looks_at():
+    """From (2, 1.02) facing east, turning right by 90° looks straight at the wall 0.32 m south:
+    the first sample inside its cells is 0.35 m out (samples every 0.05 m); turning left sees
+    nothing within 1 m; a turn of 30° right meets the wall 0.32 / sin 30° = 0.64 m out (sample
+    0.65 m)."""
+    from mrslam_core.exploration.planning import sweep_clearance
+
+    grid = _wall_south()
+    pose = np.array([2.0, 1.02, 0.0])
+    occ = grid.occupied()
+    assert sweep_clearance(occ, grid.origin, grid.res, pose, -np.pi / 2, 1.0) == pytest.approx(0.35)
+    assert sweep_clearance(occ, grid.origin, grid.res, pose, np.pi / 2, 1.0) == 1.0
+    assert sweep_clearance(occ, grid.origin, grid.res, pose, -np.radians(30), 1.0) == pytest.approx(0.65)
+
+
+def test_a_turn_on_the_spot_beside_a_wall_goes_round_the_open_side():
+    """A robot 0.3 m north of a wall, facing west-south-west (-150°), must turn 150° to face its
+    aim due east. The short way (left, through south) sweeps the camera across the wall, so it
+    turns right, through north; it keeps turning right where the aim is 170° to its left, and
+    drives once the aim is ahead. Without the wall, or for a turn of 120° or less, the short way."""
+    from mrslam_core.exploration.explorer import Explorer
+
+    rate = 0.5
+    ex = Explorer(ExplorationConfig(max_turn_rate=rate, open_side_turns=True), ["r"])
+    grid, aim = _wall_south(), np.array([3.0, 1.0])
+    pose = np.array([2.0, 1.0, np.radians(-150.0)])
+    assert ex._turn_side("r", grid, pose, aim, 0.0, rate) == -rate and ex.long_turns == 1
+    pose[2] = np.radians(-170.0)  # turned 20° right: the aim is now 170° to the left
+    assert ex._turn_side("r", grid, pose, aim, 0.0, rate) == -rate
+    pose[2] = np.radians(40.0)  # 2·40° > rate: still clipped
+    assert ex._turn_side("r", grid, pose, aim, 0.0, -rate) == -rate
+    assert ex._turn_side("r", grid, pose, aim, 0.2, -0.1) == -0.1 and ex.spin == {}  # driving: as pure pursuit says
+    free = _wall_south()
+    free.logodds[6, :] = -3.0
+    ex = Explorer(ExplorationConfig(max_turn_rate=rate, open_side_turns=True), ["r"])
+    assert ex._turn_side("r", free, np.array([2.0, 1.0, np.radians(-150.0)]), aim, 0.0, rate) == rate
+    assert ex._turn_side("r", grid, np.array([2.0, 1.0, np.radians(-115.0)]), aim, 0.0, rate) == rate
+    assert ex.long_turns == 0

@@ -152,3 +152,25 @@ def test_explained_counts_the_matches_a_pose_explains():
     assert explained(pose, target, source, matches, 0.3).sum() == 3
     assert explained(np.zeros(3), target, source, matches, 0.1).sum() == 0
     assert explained(pose, target, source, matches[:0], 0.1).sum() == 0
+
+
+def test_explained_with_a_gate_uses_both_covariances_and_the_floor():
+    # a stereo point 2 m ahead: depth σ 0.2 m, lateral σ 0.01 m, in the source (base_link) frame;
+    # target landmarks with σ 0.01 m per axis, the second 0.2 m to the side of the point
+    src = np.array([[2.0, 0.0, 0.0], [2.0, 0.0, 0.0]])
+    cov_src = np.tile(np.diag([0.2**2, 0.01**2, 1.0]), (2, 1, 1))
+    dst = np.array([[2.0, 0.0, 0.0], [2.0, 0.2, 0.0]])
+    cov_dst = np.tile(np.diag([0.01**2, 0.01**2, 1.0]), (2, 1, 1))
+    desc = np.eye(2, dtype=np.float32)
+    target, source = LandmarkMap(dst, cov_dst, desc), LandmarkMap(src, cov_src, desc)
+    matches = np.array([[0, 0], [1, 1]])
+    zero = np.zeros(3)
+    assert explained(zero, target, source, matches, 0.3).tolist() == [True, True]
+    # sideways the second is 0.2 m against σ √2e-4 m: d² = 200 > 9.21
+    assert explained(zero, target, source, matches, 0.3, gate=9.21).tolist() == [True, False]
+    # under a pose turned 3° the point moves 2·sin 3° = 0.105 m sideways: d² ≈ 55 and 45
+    turned = np.array([0.0, 0.0, np.radians(3.0)])
+    assert explained(turned, target, source, matches, 0.3).tolist() == [True, True]
+    assert explained(turned, target, source, matches, 0.3, gate=9.21).tolist() == [False, False]
+    # a pose-noise floor of 0.05 m (variance + 0.0025 m²) takes both inside: d² ≈ 4.1 and 3.3
+    assert explained(turned, target, source, matches, 0.3, gate=9.21, floor=0.05).tolist() == [True, True]
