@@ -119,8 +119,9 @@ class ExplorationConfig:
         open_side_turns: a turn on the spot of more than 120° goes the long way round when
             the short way sweeps the robot's heading past an occupied cell nearer than 0.6 m
             and the long way does not come as near (0.2 m further or more): a stereo camera
-            facing a wall nearer than its near limit sees nothing, and a robot that turns blind
-            by 100-200° beside a wall loses 3-5° of heading (docs/results.md, session 15).
+            facing a wall nearer than its near limit sees nothing, and a robot that turned blind
+            beside a wall came out 5-7° off in the recorded demos traced. On in the team defaults:
+            lower ATE, less explored (docs/results.md, session 15).
         start_delay: each robot stands still this long from its first pose on, so that the map
             is started from the known start poses: before a robot's first landmarks nothing can
             tell its particles' motion noise apart, and the landmarks it maps first fix the

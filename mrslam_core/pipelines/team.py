@@ -83,7 +83,8 @@ def _team_exploration() -> ExplorationConfig:
     # of recorded demos d1 and d3 were turns of 29-212 deg with the camera 0.06-0.14 m from a
     # wall; in the two traced, the robot came out of the turn 3-7 deg off. With keep_arc and the
     # map check's gain gate (same seeds): met 9 of 9, summed ATE 0.122 -> 0.114 m, explored
-    # 64 -> 58 %; its own share is not measured apart.
+    # 64 -> 58 %. Without it (keep_arc and the map check only): met 9 of 9, 0.123 m, 65 %: it costs
+    # exploration for an accuracy gain within the noise of 9 seeds (docs/results.md, session 15).
     return ExplorationConfig(max_speed=0.35, max_turn_rate=0.5, robot_radius=0.4, start_delay=1.0, keep_arc=True,
                              open_side_turns=True)
 
