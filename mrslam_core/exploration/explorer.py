@@ -14,7 +14,7 @@ from mrslam_core.exploration.config import ExplorationConfig
 from mrslam_core.exploration.cost import travel_cost
 from mrslam_core.exploration.frontiers import frontier_cells, frontier_groups, frontier_targets, standing_cells
 from mrslam_core.exploration.grid import OccupancyGrid
-from mrslam_core.exploration.planning import astar, inflate, pure_pursuit, sweep_clearance
+from mrslam_core.exploration.planning import astar, inflate, pure_pursuit
 
 
 #: ``open_side_turns``: turns on the spot larger than this [rad] may go the long way round, when the
@@ -79,6 +79,25 @@ def reaches_any(passable: np.ndarray, start: tuple[int, int], cells: np.ndarray)
     inside = np.all((cells >= 0) & (cells < np.array(passable.shape)), axis=1)
     rc = cells[inside]
     return bool(np.any(labels[rc[:, 0], rc[:, 1]] == own))
+
+
+def sweep_clearance(grid: OccupancyGrid, blocked: np.ndarray, pose: np.ndarray, turn: float, reach: float,
+                    step: float = np.radians(10.0)) -> float:
+    """Nearest cell of ``blocked`` (H, W) [m] (``reach`` when none) seen along the headings a turn
+    on the spot from ``pose`` (x, y, θ) by ``turn`` [rad] sweeps: rays from the robot's centre
+    every ``step`` [rad] of the sweep (the current heading, where either way round starts, left
+    out), sampled every half cell up to ``reach`` [m]."""
+    n = int(np.ceil(abs(turn) / step)) + 1
+    heading = pose[2] + np.linspace(0.0, turn, n)[1:]
+    r = np.arange(grid.res / 2, reach, grid.res / 2)
+    xy = pose[:2] + r[None, :, None] * np.stack([np.cos(heading), np.sin(heading)], -1)[:, None, :]
+    cells = grid.cell_of(xy)
+    inside = grid.inside(cells)
+    hit = np.zeros(inside.shape, bool)
+    hit[inside] = blocked[cells[inside][:, 0], cells[inside][:, 1]]
+    if not hit.any():
+        return float(reach)
+    return float(r[hit.argmax(axis=1)[hit.any(axis=1)]].min())
 
 
 def planning_layers(grid: OccupancyGrid, poses: list[np.ndarray], cfg: ExplorationConfig,
@@ -227,8 +246,8 @@ class Explorer:
             if abs(bearing) <= OPEN_SIDE_TURN:
                 return w
             occupied = grid.occupied()
-            short = sweep_clearance(occupied, grid.origin, grid.res, pose, bearing, 1.0)
-            long = sweep_clearance(occupied, grid.origin, grid.res, pose, bearing - np.sign(bearing) * 2 * np.pi, 1.0)
+            short = sweep_clearance(grid, occupied, pose, bearing, 1.0)
+            long = sweep_clearance(grid, occupied, pose, bearing - np.sign(bearing) * 2 * np.pi, 1.0)
             if short >= OPEN_SIDE_NEAR or long < short + OPEN_SIDE_GAIN:
                 return w
             self.spin[name] = -float(np.sign(bearing))

@@ -88,26 +88,3 @@ def pure_pursuit(pose: np.ndarray, path_xy: np.ndarray, lookahead: float, max_sp
         v = max_turn_rate / abs(curvature)
     return float(v), float(np.clip(v * curvature, -max_turn_rate, max_turn_rate)), idx
 
-
-def sweep_clearance(blocked: np.ndarray, origin: np.ndarray, res: float, pose: np.ndarray, turn: float,
-                    reach: float, step: float = np.radians(10.0)) -> float:
-    """Nearest blocked cell [m] (``reach`` when none) seen along the headings a turn on the spot
-    from ``pose`` (x, y, θ) by ``turn`` [rad] sweeps: rays from the robot's centre every ``step``
-    [rad] of the sweep (the current heading, where either way round starts, left out), sampled
-    every half cell up to ``reach`` [m].
-
-    Args:
-        blocked: (H, W) bool grid, row = y, column = x; ``origin`` (x, y) [m] of its corner cell
-            and ``res`` [m] its cell size.
-    """
-    n = int(np.ceil(abs(turn) / step)) + 1
-    heading = pose[2] + np.linspace(0.0, turn, n)[1:]
-    r = np.arange(res / 2, reach, res / 2)
-    xy = pose[:2] + r[None, :, None] * np.stack([np.cos(heading), np.sin(heading)], -1)[:, None, :]
-    ij = np.floor((xy[..., ::-1] - np.asarray(origin)[::-1]) / res).astype(np.int64)
-    inside = (ij >= 0).all(-1) & (ij[..., 0] < blocked.shape[0]) & (ij[..., 1] < blocked.shape[1])
-    hit = np.zeros(inside.shape, bool)
-    hit[inside] = blocked[ij[inside][:, 0], ij[inside][:, 1]]
-    if not hit.any():
-        return float(reach)
-    return float(r[hit.argmax(axis=1)[hit.any(axis=1)]].min())

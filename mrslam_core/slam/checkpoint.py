@@ -32,7 +32,7 @@ import numpy as np
 from mrslam_core.configio import ConfigError, from_dict, to_dict
 from mrslam_core.slam.config import FilterConfig
 from mrslam_core.slam.filter import MultiRobotFastSLAM
-from mrslam_core.slam.landmarks import LandmarkStore
+from mrslam_core.slam.landmarks import SLOT_IDS, LandmarkStore
 from mrslam_core.slam.models import ObservationModel
 from mrslam_core.slam.tracks import TrackMemory
 
@@ -45,7 +45,7 @@ FILTER_ARRAYS = ("poses", "log_w", "score")
 #: ``pool_*``) is saved up to its last chunk in use: chunk ids stay the same after a reload, and
 #: free chunks hold nothing that is ever read (a chunk is overwritten whenever it is taken).
 POOL_ARRAYS = ("refcount", "pool_mean", "pool_cov", "pool_exists", "pool_count", "pool_score")
-STORE_ARRAYS = ("table",) + POOL_ARRAYS + ("descriptor", "ref", "origin", "born", "maker")
+STORE_ARRAYS = ("table",) + POOL_ARRAYS + ("descriptor", "ref") + SLOT_IDS
 #: Filter attributes saved or rebuilt one by one. Every other attribute of the filter (its
 #: counters, flags and per-robot arrays) is saved by type (see :func:`_other_state`): scalars in
 #: the header's ``attributes``, arrays as ``attr.<name>``, ``{int: array}`` dicts as
@@ -346,7 +346,7 @@ def _rebuild_store(path, meta: dict[str, Any], arrays: dict[str, np.ndarray], m:
         (all(getattr(store, f"pool_{f}").shape == (pool, chunk) for f in ("exists", "count", "score")),
          "pool exists/count/score shape"),
         (store.descriptor.shape == (cap, store.descriptor_dim), "descriptor shape"),
-        (store.ref.shape == (cap, dim) and all(getattr(store, a).shape == (cap,) for a in ("origin", "born", "maker")),
+        (store.ref.shape == (cap, dim) and all(getattr(store, a).shape == (cap,) for a in SLOT_IDS),
          "ref/origin/born/maker shape"),
         (0 <= store.size <= cap, "size exceeds capacity"),
         (np.array_equal(np.bincount(store.table.ravel(), minlength=pool), store.refcount), "refcount != table"),

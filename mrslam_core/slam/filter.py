@@ -737,7 +737,7 @@ class MultiRobotFastSLAM:
 
     def _create(
         self, poses: np.ndarray, z: np.ndarray, r: np.ndarray, desc: np.ndarray, tracks: np.ndarray,
-        new: np.ndarray, stamp_ns: int, maker: int = -1,
+        new: np.ndarray, stamp_ns: int, maker: int,
     ) -> tuple[int, np.ndarray]:
         """New landmarks for observations that were not associated: one slot per observation.
 

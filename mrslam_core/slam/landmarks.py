@@ -29,6 +29,9 @@ def _width(pool: np.ndarray) -> int:
     return int(np.prod(pool.shape[2:], dtype=np.int64))
 
 
+#: per-slot int64 arrays of the store (−1: unknown): the creating track id, stamp and robot
+SLOT_IDS = ("origin", "born", "maker")
+
 class LandmarkStore:
     """Landmarks of M particles.
 
@@ -153,13 +156,12 @@ class LandmarkStore:
             desc[: self.descriptor.shape[0]] = self.descriptor
             ref = np.full((cap, self.dim), np.inf)
             ref[: self.ref.shape[0]] = self.ref
-            origin = np.full(cap, -1, np.int64)
-            origin[: self.origin.size] = self.origin
-            born = np.full(cap, -1, np.int64)
-            born[: self.born.size] = self.born
-            maker = np.full(cap, -1, np.int64)
-            maker[: self.maker.size] = self.maker
-            self.descriptor, self.ref, self.origin, self.born, self.maker = desc, ref, origin, born, maker
+            self.descriptor, self.ref = desc, ref
+            for name in SLOT_IDS:
+                old = getattr(self, name)
+                grown = np.full(cap, -1, np.int64)
+                grown[: old.size] = old
+                setattr(self, name, grown)
         cols_needed = -(-self.size // self.chunk)
         if cols_needed > self.columns:
             add = cols_needed - self.columns
@@ -339,9 +341,9 @@ class LandmarkStore:
         self.table = new_table
         self.descriptor[: live.size] = self.descriptor[live]
         self.ref[: live.size] = self.ref[live]
-        self.origin[: live.size] = self.origin[live]
-        self.born[: live.size] = self.born[live]
-        self.maker[: live.size] = self.maker[live]
+        for name in SLOT_IDS:
+            arr = getattr(self, name)
+            arr[: live.size] = arr[live]
         self.ref[live.size : self.size] = np.inf
         self.size = live.size
         self._tree = None

@@ -471,14 +471,14 @@ def test_sweep_clearance_is_the_nearest_occupied_cell_the_turn_looks_at():
     the first sample inside its cells is 0.35 m out (samples every 0.05 m); turning left sees
     nothing within 1 m; a turn of 30° right meets the wall 0.32 / sin 30° = 0.64 m out (sample
     0.65 m)."""
-    from mrslam_core.exploration.planning import sweep_clearance
+    from mrslam_core.exploration.explorer import sweep_clearance
 
     grid = _wall_south()
     pose = np.array([2.0, 1.02, 0.0])
     occ = grid.occupied()
-    assert sweep_clearance(occ, grid.origin, grid.res, pose, -np.pi / 2, 1.0) == pytest.approx(0.35)
-    assert sweep_clearance(occ, grid.origin, grid.res, pose, np.pi / 2, 1.0) == 1.0
-    assert sweep_clearance(occ, grid.origin, grid.res, pose, -np.radians(30), 1.0) == pytest.approx(0.65)
+    assert sweep_clearance(grid, occ, pose, -np.pi / 2, 1.0) == pytest.approx(0.35)
+    assert sweep_clearance(grid, occ, pose, np.pi / 2, 1.0) == 1.0
+    assert sweep_clearance(grid, occ, pose, -np.radians(30), 1.0) == pytest.approx(0.65)
 
 
 def test_a_turn_on_the_spot_beside_a_wall_goes_round_the_open_side():
