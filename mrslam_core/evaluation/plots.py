@@ -10,16 +10,19 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
-from matplotlib.patches import Ellipse  # noqa: E402
+from matplotlib.collections import EllipseCollection  # noqa: E402
 
 from mrslam_core.evaluation.metrics import position_errors  # noqa: E402
 
 
-def _ellipse(mean: np.ndarray, cov: np.ndarray, nsigma: float = 2.0, **kw) -> Ellipse:
-    vals, vecs = np.linalg.eigh(cov[:2, :2])
-    vals = np.clip(vals, 0, None)
-    angle = np.degrees(np.arctan2(vecs[1, 1], vecs[0, 1]))
-    return Ellipse(mean[:2], 2 * nsigma * np.sqrt(vals[1]), 2 * nsigma * np.sqrt(vals[0]), angle=angle, **kw)
+def ellipse_axes(cov: np.ndarray, nsigma: float = 2.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The ``nsigma`` ellipses of the planar blocks of ``cov`` (L, d, d), d ≥ 2: full widths along
+    the major axis, full heights along the minor axis (L,) [units of the covariance's square root]
+    and the major axis' angle from x (L,) [deg]."""
+    vals, vecs = np.linalg.eigh(np.asarray(cov, float)[:, :2, :2])
+    vals = np.clip(vals, 0.0, None)
+    angle = np.degrees(np.arctan2(vecs[:, 1, 1], vecs[:, 0, 1]))
+    return 2 * nsigma * np.sqrt(vals[:, 1]), 2 * nsigma * np.sqrt(vals[:, 0]), angle
 
 
 def plot_run(out: Path, trajectories: dict, landmarks: dict | None = None, truth_landmarks=None,
@@ -59,8 +62,10 @@ def plot_run(out: Path, trajectories: dict, landmarks: dict | None = None, truth
 
     if landmarks is not None and len(landmarks["mean"]):
         fig, ax = plt.subplots(figsize=(9, 7))
-        for mean, cov in zip(landmarks["mean"], landmarks["cov"]):
-            ax.add_patch(_ellipse(mean, cov, fill=False, lw=0.6, color="tab:blue"))
+        widths, heights, angles = ellipse_axes(landmarks["cov"])
+        ax.add_collection(EllipseCollection(widths, heights, angles, units="xy", offsets=landmarks["mean"][:, :2],
+                                            offset_transform=ax.transData, facecolors="none",
+                                            edgecolors="tab:blue", linewidths=0.6))
         ax.plot(landmarks["mean"][:, 0], landmarks["mean"][:, 1], "+", color="tab:blue", ms=4, label="landmarks (best particle, 2σ)")
         if truth_landmarks is not None:
             ax.plot(truth_landmarks[:, 0], truth_landmarks[:, 1], "kx", ms=6, label="ground truth")
