@@ -81,6 +81,12 @@ class SlamNodeConfig(CentralConfig):
         process_budget: wall seconds one run may take (at least one set is processed); the rest
             waits, so the callbacks keep draining the subscriptions and a flood overflows the
             mapper's bounded queue (counted, oldest first) instead of the middleware's queues [s].
+        discovery_wait: wall seconds a starting (or resumed) node waits for every input topic
+            to have a publisher, so that it subscribes transient-local where they keep a history
+            and receives what was published before it joined: a node whose subscription matched
+            after a robot's odometry began took the first odometry it heard for the robot's start
+            pose, and one live faulted run mapped robot1 6.3 deg turned from its first second on
+            (docs/reliability.md) [s].
     """
 
     map_frame: str = "map"
@@ -93,6 +99,7 @@ class SlamNodeConfig(CentralConfig):
     input_depth: int = 1000
     process_period: float = 0.01
     process_budget: float = 0.0
+    discovery_wait: float = 3.0
 
 
 def points_cloud(mean: np.ndarray, stamp_ns: int, frame_id: str) -> PointCloud2:
@@ -127,11 +134,11 @@ class SlamNode(Node):
         self.marker_pub = self.create_publisher(MarkerArray, "/slam/landmark_markers", 1)
         self.particle_pub = self.create_publisher(PoseArray, "/slam/particles", 1)
         topics = [f"/{r}/{kind}" for kind in ("odom", "observations") for r in robots]
-        if any(self.mapper.trajectory.values()):
-            self._wait_for_publishers(topics, 3.0)  # resumed: learn who keeps a history first
+        self._wait_for_publishers(topics, self.cfg.discovery_wait)  # learn who keeps a history first
         #: input subscriptions, odometry first: :meth:`drain` empties them in this order
-        # transient-local where every publisher keeps a history: a restarted node receives what
-        # was published while it was down (qos.py); volatile otherwise, so any publisher matches
+        # transient-local where every publisher keeps a history: a node that starts late or
+        # restarts receives what was published before it joined (qos.py); volatile otherwise, so
+        # any publisher matches
         self.inputs = [self.create_subscription(Odometry, f"/{r}/odom", lambda m, r=r: self.on_odom(r, m),
                                                 self._input_qos(f"/{r}/odom", 100), callback_group=inputs)
                        for r in robots]

@@ -1,6 +1,7 @@
 """The central SLAM node on a live graph: synthetic odometry and observation clouds of two robots
 go in over DDS, poses in the map frame come out, closer to the truth than dead reckoning."""
 
+import threading
 import time
 
 import numpy as np
@@ -162,6 +163,7 @@ def test_bad_input_is_counted_on_diagnostics_and_the_node_keeps_running():
     from nav_msgs.msg import Odometry
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.parameter import Parameter
+    from rclpy.qos import DurabilityPolicy
     from sensor_msgs.msg import PointCloud2
 
     from mrslam_core.types import ObservationSet
@@ -213,5 +215,78 @@ def test_bad_input_is_counted_on_diagnostics_and_the_node_keeps_running():
             assert counters.get(f"drops.{reason}", 0) >= 1, (reason, counters)
         assert counters.get("drops.duplicate_stamp", 0) + counters.get("drops.stale_stamp", 0) >= 1, counters
         assert counters["updates"] == 1  # the one good set went through
+    finally:
+        rclpy.shutdown()
+
+
+def test_a_node_that_starts_after_the_odometry_began_takes_the_start_from_its_history():
+    """robot9's odometry turns it 0.4 rad on the spot over its first second, published
+    transient-local (as the simulator does, qos.ODOMETRY_HISTORY) by publishers that appear
+    0.3 s after the central node began to start (discovered late, as across processes). The node
+    waits for them, subscribes transient-local, receives that history, and puts the robot's first
+    update at the start pose turned by the odometry since its first message: heading 0.5 + 0.44
+    rad. A node that took the first odometry it heard live for the start pose would put it at
+    0.5 rad (one live faulted run: robot1 6.3 deg off from its first second on)."""
+    import rclpy
+    from geometry_msgs.msg import PoseWithCovarianceStamped
+    from nav_msgs.msg import Odometry
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.parameter import Parameter
+    from rclpy.qos import DurabilityPolicy
+    from sensor_msgs.msg import PointCloud2
+
+    from mrslam_core.types import ObservationSet
+    from mrslam_ros.conversions import msg_to_pose, ns_to_stamp, observations_to_cloud, pose_to_msg
+    from mrslam_ros.qos import OBSERVATION_HISTORY, ODOMETRY_HISTORY
+    from mrslam_ros.slam_node import SlamNode
+
+    # robot9: no other test's (possibly still discovered) publishers share its topics
+    rclpy.init()
+    try:
+        feeder = rclpy.create_node("feeder")
+        pubs = {}
+
+        def odometry(i: int) -> None:  # stamp i / 10 s, heading 0.04 i rad
+            m = Odometry()
+            m.header.stamp = ns_to_stamp(i * 100_000_000)
+            m.header.frame_id, m.child_frame_id = "robot9/odom", "robot9/base_link"
+            m.pose.pose = pose_to_msg(np.array([0.0, 0.0, 0.04 * i]))
+            pubs["odom"].publish(m)
+
+        def robot_starts() -> None:
+            time.sleep(0.3)
+            pubs["odom"] = feeder.create_publisher(Odometry, "/robot9/odom", ODOMETRY_HISTORY)
+            pubs["obs"] = feeder.create_publisher(PointCloud2, "/robot9/observations", OBSERVATION_HISTORY)
+            for i in range(11):
+                odometry(i)
+
+        robot = threading.Thread(target=robot_starts)
+        robot.start()
+        slam = SlamNode(parameter_overrides=[
+            Parameter("robots", value=["robot9"]),
+            Parameter("start_poses", value=[1.0, 2.0, 0.5]),
+            Parameter("filter.num_particles", value=20),
+        ])
+        robot.join()
+        assert slam.inputs[0].qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL
+        poses = []
+        feeder.create_subscription(PoseWithCovarianceStamped, "/robot9/pose", poses.append, 10)
+        ex = SingleThreadedExecutor()
+        ex.add_node(slam)
+        ex.add_node(feeder)
+        for _ in range(20):
+            ex.spin_once(timeout_sec=0.01)
+        odometry(11)
+        odometry(12)
+        z = np.array([[2.0, 0.5, 0.3], [3.0, -1.0, 0.8], [2.5, 0.0, 1.2]])
+        pubs["obs"].publish(observations_to_cloud(
+            ObservationSet("robot9", 1_100_000_000, z, np.tile(np.eye(3) * 1e-3, (3, 1, 1))), "robot9/base_link"))
+        end = time.time() + 10
+        while time.time() < end and not poses:
+            ex.spin_once(timeout_sec=0.05)
+        assert poses, dict(slam.diag.drops)
+        pose = msg_to_pose(poses[0].pose.pose)
+        assert pose[0] == pytest.approx(1.0, abs=0.01) and pose[1] == pytest.approx(2.0, abs=0.01)
+        assert pose[2] == pytest.approx(0.94, abs=0.05), dict(slam.diag.drops)
     finally:
         rclpy.shutdown()
