@@ -57,6 +57,17 @@ class ExploreNodeConfig:
     grid: GridConfig = field(default_factory=GridConfig)
 
 
+#: the explorer's counters the node logs as they grow: (attribute, as a warning, what happened)
+EVENTS = (
+    ("stalls", True, "a robot stalled (commanded forward, did not move): backing off; stalls"),
+    ("boxed_in", True, "a robot can reach no frontier from where it stands: recovering; times"),
+    ("long_turns", False, "a robot turns the long way round, away from a wall (open_side_turns); such turns"),
+    ("turn_backoffs", False, "a robot backs away from a wall before turning on the spot (turn_clearance); such turns"),
+    ("blocked_turns", True, "a robot's turn on the spot did not turn (against a jamb or a teammate): turning the "
+                            "other way round (turn_stall_time); such turns"),
+)
+
+
 class ExploreNode(Node):
     """Thin wrapper around :class:`Explorer` and the grid."""
 
@@ -110,20 +121,15 @@ class ExploreNode(Node):
     def control(self) -> None:
         if len(self.poses) < len(self.cfg.robots):
             return  # every robot must have a pose before targets are shared out
-        stalls, held, boxed, long = self.explorer.stalls, self.explorer.held, self.explorer.boxed_in, self.explorer.long_turns
-        commands = self.explorer.step(self.grid, self.poses, self.now_ns * 1e-9)
-        if self.explorer.stalls > stalls:
-            self.get_logger().warning(f"a robot stalled (commanded forward, did not move): backing off; "
-                                      f"{self.explorer.stalls} stalls so far")
-        if self.explorer.boxed_in > boxed:
-            self.get_logger().warning(f"a robot can reach no frontier from where it stands: recovering; "
-                                      f"{self.explorer.boxed_in} times so far")
-        if self.explorer.long_turns > long:
-            self.get_logger().info(f"a robot turns the long way round, away from a wall (open_side_turns); "
-                                   f"{self.explorer.long_turns} such turns so far")
-        if self.explorer.held > held:
-            self.get_logger().info(f"a robot waits for another in its way (keep_clear); {self.explorer.held} "
-                                   "commands held so far", throttle_duration_sec=5.0)
+        ex = self.explorer
+        before = {attr: getattr(ex, attr) for attr in ("held", *(e[0] for e in EVENTS))}
+        commands = ex.step(self.grid, self.poses, self.now_ns * 1e-9)
+        for attr, warn, what in EVENTS:
+            if getattr(ex, attr) > before[attr]:
+                (self.get_logger().warning if warn else self.get_logger().info)(f"{what}; {getattr(ex, attr)} so far")
+        if ex.held > before["held"]:
+            self.get_logger().info(f"a robot waits for another in its way (keep_clear); {ex.held} commands held so far",
+                                   throttle_duration_sec=5.0)
         clock_ns = self.get_clock().now().nanoseconds
         for robot, (v, w) in commands.items():
             if clock_ns - self.pose_stamps[robot] > self.cfg.pose_timeout * 1e9:

@@ -122,6 +122,17 @@ class ExplorationConfig:
             facing a wall nearer than its near limit sees nothing, and a robot that turned blind
             beside a wall came out 5-7° off in the recorded demos traced. On in the team defaults:
             lower ATE, less explored (docs/results.md, session 15).
+        turn_clearance: before a turn on the spot whose headings come nearer than this [m] to an
+            occupied cell (rays from the robot's centre), the robot first backs straight away,
+            up to 0.4 m and only where the space behind is free, until they no longer do; a
+            turn already begun is not checked again (0: off). The cameras sit 0.12 m ahead of the
+            axle and the stereo near limit is 0.21 m from them, so a turn nearer than 0.33 m to
+            a wall is blind; counted as ``turn_backoffs``. On in the team defaults at 0.6 m: no
+            robot above 0.10 m over 28 closed-loop seeds (docs/results.md, session 16).
+        turn_stall_time: a robot turning on the spot whose heading moved less than 5° in this
+            long is against something (a door jamb, a teammate: its body's corners swing out to
+            0.33 m from its axle) and turns the other way round instead, once per turn; counted as
+            ``blocked_turns`` (0: off) [s].
         start_delay: each robot stands still this long from its first pose on, so that the map
             is started from the known start poses: before a robot's first landmarks nothing can
             tell its particles' motion noise apart, and the landmarks it maps first fix the
@@ -161,8 +172,12 @@ class ExplorationConfig:
     keep_clear: float = 0.0
     path_clearance: float = 0.0
     open_side_turns: bool = False
+    turn_clearance: float = 0.0
+    turn_stall_time: float = 1.5
     start_delay: float = 0.0
 
     def __post_init__(self) -> None:
         if not self.unknown_cost >= 1.0:
             raise ValueError("unknown_cost must be >= 1")
+        if not self.turn_clearance >= 0.0:
+            raise ValueError("turn_clearance must be >= 0")

@@ -15,12 +15,23 @@ from mrslam_core.exploration.cost import travel_cost
 from mrslam_core.exploration.frontiers import frontier_cells, frontier_groups, frontier_targets, standing_cells
 from mrslam_core.exploration.grid import OccupancyGrid
 from mrslam_core.exploration.planning import astar, inflate, pure_pursuit
+from mrslam_core.geometry.se2 import wrap_angle
 
 
 #: ``open_side_turns``: turns on the spot larger than this [rad] may go the long way round, when the
 #: short way sweeps the heading past an occupied cell nearer than ``OPEN_SIDE_NEAR`` [m] and the long
 #: way keeps ``OPEN_SIDE_GAIN`` [m] further from any
 OPEN_SIDE_TURN, OPEN_SIDE_NEAR, OPEN_SIDE_GAIN = np.radians(120.0), 0.6, 0.2
+
+#: ``turn_clearance``: a robot backs away at most ``BACK_MAX`` [m] before a turn on the spot, in
+#: ``BACK_STEP`` [m] steps, and only where the fan of ±``BACK_FAN`` [rad] behind it is free of
+#: occupied cells to ``BACK_REAR`` [m] (its body's rear from its axle, plus 0.1 m) beyond the
+#: distance backed
+BACK_MAX, BACK_STEP, BACK_FAN, BACK_REAR = 0.4, 0.1, np.radians(35.0), 0.365
+
+#: ``turn_stall_time``: a turn on the spot counts as blocked when the heading moved less than this
+#: [rad] in that time
+TURN_STALL_ANGLE = np.radians(5.0)
 
 #: candidate targets within this of a robot's current target count as that target (``keep_goal``);
 #: the candidates along a frontier are 1 m apart [m]
@@ -162,6 +173,16 @@ class Explorer:
     spin: dict[str, float] = field(default_factory=dict)
     #: turns on the spot sent the long way round (``open_side_turns``)
     long_turns: int = 0
+    #: per robot backing away before a turn on the spot (``turn_clearance``): where it began
+    #: (x, y) [m], the distance to back [m] and the time it gives up [s]
+    backing: dict[str, tuple[np.ndarray, float, float]] = field(default_factory=dict)
+    #: per robot whose last command was a turn on the spot (checked for ``turn_clearance`` once,
+    #: as it begins): since when [s], its heading then [rad], and whether it was reversed already
+    turning: dict[str, tuple[float, float, bool]] = field(default_factory=dict)
+    #: turns on the spot that did not turn and were sent the other way round (``turn_stall_time``)
+    blocked_turns: int = 0
+    #: turns on the spot preceded by backing away from an occupied cell (``turn_clearance``)
+    turn_backoffs: int = 0
 
     def _replan(self, grid: OccupancyGrid, poses: dict[str, np.ndarray], now: float) -> None:
         cfg = self.config
@@ -255,6 +276,64 @@ class Explorer:
         direction = self.spin[name]
         left = bearing if np.sign(bearing) == direction else bearing + direction * 2 * np.pi
         return float(direction * min(rate, 2.0 * abs(left)))
+
+    def _end_turn(self, name: str) -> None:
+        """Forget ``name``'s turn on the spot: its direction, its backing away, that it began."""
+        self.spin.pop(name, None)
+        self.backing.pop(name, None)
+        self.turning.pop(name, None)
+
+    def _unblock_turn(self, name: str, pose: np.ndarray, now: float, w: float) -> float:
+        """The turn rate [rad/s] of ``name``, turning on the spot at ``w``: the other way round
+        (once per turn) when its heading moved less than ``TURN_STALL_ANGLE`` in the last
+        ``turn_stall_time`` s. A robot beside a door jamb or a teammate swings its body's corners
+        out to 0.33 m from its axle; against them it turns no further however long it is told
+        to, and the other way round frees it."""
+        since, heading, reversed_ = self.turning[name]
+        stall = self.config.turn_stall_time
+        if stall <= 0 or now - since < stall:
+            return w
+        if abs(float(wrap_angle(pose[2] - heading))) >= TURN_STALL_ANGLE or reversed_:
+            self.turning[name] = (now, float(pose[2]), reversed_)
+            return w
+        self.turning[name] = (now, float(pose[2]), True)
+        self.spin[name] = -float(np.sign(w))
+        self.blocked_turns += 1
+        return -w
+
+    def _turn_sweep(self, name: str, pose: np.ndarray, aim: np.ndarray) -> float:
+        """The turn [rad] a robot at ``pose`` turning on the spot towards ``aim`` (x, y) [m] is to
+        make: the short way, or the long way once ``open_side_turns`` sent it round."""
+        bearing = float(np.arctan2(aim[1] - pose[1], aim[0] - pose[0]) - pose[2])
+        bearing = float((bearing + np.pi) % (2 * np.pi) - np.pi)
+        direction = self.spin.get(name)
+        if direction is not None and np.sign(bearing) != direction:
+            bearing += direction * 2 * np.pi
+        return bearing
+
+    def _backoff(self, grid: OccupancyGrid, pose: np.ndarray, turn: float) -> float:
+        """How far [m] a robot at ``pose`` (x, y, θ) should back straight away before turning on
+        the spot by ``turn`` [rad] (see ``turn_clearance``): the least multiple of ``BACK_STEP``
+        after which the headings swept keep ``turn_clearance`` from every occupied cell; failing
+        that, the one that gains the most clearance (0.1 m at least); 0 where the turn is clear
+        already or there is no room behind."""
+        need = self.config.turn_clearance
+        occupied = grid.occupied()
+        here = sweep_clearance(grid, occupied, pose, turn, need)
+        if here >= need:
+            return 0.0
+        rear = np.array([pose[0], pose[1], pose[2] + np.pi - BACK_FAN])
+        room = sweep_clearance(grid, occupied, rear, 2 * BACK_FAN, BACK_MAX + BACK_REAR) - BACK_REAR
+        heading = np.array([np.cos(pose[2]), np.sin(pose[2])])
+        best, gained = 0.0, here + 0.1
+        for d in np.arange(BACK_STEP, min(BACK_MAX, room) + 1e-9, BACK_STEP):
+            backed = np.array([*(pose[:2] - d * heading), pose[2]])
+            clear = sweep_clearance(grid, occupied, backed, turn, need)
+            if clear >= need:
+                return float(d)
+            if clear >= gained:
+                best, gained = float(d), clear
+        return best
 
     def _set_goal(self, name, target, grid, passable, poses, now, targets) -> None:
         """Plan ``name``'s path to ``target`` (x, y) [m]. When A* finds none, the target is struck
@@ -396,15 +475,34 @@ class Explorer:
             g = self.goals.get(name)
             if now < self.recovering_until.get(name, -np.inf) and self.state is not State.COMPLETE:
                 commands[name] = (self.recovery.get(name, (-1.0, None))[0] * cfg.recovery_speed, 0.0)
-                self.spin.pop(name, None)
+                self._end_turn(name)
                 continue
             if g is None or self.state is State.COMPLETE or now - self.first_seen[name] < cfg.start_delay:
                 commands[name] = (0.0, 0.0)
-                self.spin.pop(name, None)
+                self._end_turn(name)
                 continue
-            v, w, idx = pure_pursuit(poses[name], g.path, cfg.lookahead, cfg.max_speed, cfg.max_turn_rate, cfg.keep_arc)
-            if cfg.open_side_turns:
-                w = self._turn_side(name, grid, np.asarray(poses[name], float), g.path[idx], v, w)
+            pose = np.asarray(poses[name], float)
+            backing = self.backing.get(name)
+            if backing is not None:
+                start, distance, until = backing
+                if np.linalg.norm(pose[:2] - start) < distance and now < until:
+                    commands[name] = (-cfg.recovery_speed, 0.0)
+                    continue
+                del self.backing[name]  # the turn it backed away for begins, unchecked
+            v, w, idx = pure_pursuit(pose, g.path, cfg.lookahead, cfg.max_speed, cfg.max_turn_rate, cfg.keep_arc)
+            if cfg.open_side_turns or name in self.spin:
+                w = self._turn_side(name, grid, pose, g.path[idx], v, w)
+            if v != 0.0 or w == 0.0:
+                self.turning.pop(name, None)
+            elif name not in self.turning:
+                self.turning[name] = (now, float(pose[2]), False)
+                distance = self._backoff(grid, pose, self._turn_sweep(name, pose, g.path[idx])) if cfg.turn_clearance > 0 else 0.0
+                if distance > 0:
+                    self.backing[name] = (pose[:2].copy(), distance, now + distance / cfg.recovery_speed + 2.0)
+                    self.turn_backoffs += 1
+                    v, w = -cfg.recovery_speed, 0.0
+            else:
+                w = self._unblock_turn(name, pose, now, w)
             commands[name] = (v, w)
         for name, (v, w) in commands.items():
             if v != 0.0 and self._robot_ahead(name, poses, np.sign(v)):

@@ -504,3 +504,71 @@ def test_a_turn_on_the_spot_beside_a_wall_goes_round_the_open_side():
     assert ex._turn_side("r", free, np.array([2.0, 1.0, np.radians(-150.0)]), aim, 0.0, rate) == rate
     assert ex._turn_side("r", grid, np.array([2.0, 1.0, np.radians(-115.0)]), aim, 0.0, rate) == rate
     assert ex.long_turns == 0
+
+
+def test_a_robot_facing_a_wall_backs_away_only_as_far_as_the_room_behind_allows():
+    """From (2, 1.02) facing the wall 0.32 m south, a turn right by 90° sweeps its heading within
+    0.35 m of the wall (first sample inside its cells, rays every 10° from −100°). With
+    ``turn_clearance`` 0.6 m it backs 0.3 m: the −100° ray then meets the wall 0.63 m out, the first
+    sample there at 0.65 m, beyond 0.6 m. With a wall 0.58 m behind it (room 0.6 − 0.365 m), only
+    0.2 m, which gains 0.2 m; with a wall 0.28 m behind, not at all; with the turn clear, not at all."""
+    from mrslam_core.exploration.explorer import Explorer
+
+    ex = Explorer(ExplorationConfig(turn_clearance=0.6), ["r"])
+    pose = np.array([2.0, 1.02, -np.pi / 2])
+    assert ex._backoff(_wall_south(), pose, -np.pi / 2) == pytest.approx(0.3)
+    behind = _wall_south()
+    behind.logodds[16, :] = 3.0  # cells y 1.6-1.7
+    assert ex._backoff(behind, pose, -np.pi / 2) == pytest.approx(0.2)
+    behind.logodds[13, :] = 3.0  # cells y 1.3-1.4
+    assert ex._backoff(behind, pose, -np.pi / 2) == 0.0
+    assert ex._backoff(_wall_south(), np.array([2.0, 1.02, np.pi / 2]), np.pi / 2) == 0.0
+
+
+def test_the_follower_backs_away_then_turns_without_checking_again():
+    """A robot facing the wall whose path leads north: it backs at ``recovery_speed`` (counted
+    once), keeps backing until 0.3 m from where it began, then turns on the spot."""
+    from mrslam_core.exploration.explorer import Explorer, Goal
+
+    cfg = ExplorationConfig(turn_clearance=0.6, max_turn_rate=0.5)
+    ex = Explorer(cfg, ["r"])
+    ex.last_plan_s = 0.0
+    grid = _wall_south()
+    ex.goals["r"] = Goal(np.array([2.0, 3.0]), np.array([[2.0, 1.5], [2.0, 2.0], [2.0, 2.5], [2.0, 3.0]]), 0.0)
+    assert ex.step(grid, {"r": np.array([2.0, 1.02, -np.pi / 2])}, 0.2) == {"r": (-cfg.recovery_speed, 0.0)}
+    assert ex.step(grid, {"r": np.array([2.0, 1.22, -np.pi / 2])}, 0.4) == {"r": (-cfg.recovery_speed, 0.0)}
+    v, w = ex.step(grid, {"r": np.array([2.0, 1.33, -np.pi / 2])}, 0.6)["r"]
+    assert v == 0.0 and abs(w) == 0.5 and ex.turn_backoffs == 1 and ex.backing == {}
+    v, w = ex.step(grid, {"r": np.array([2.0, 1.33, -np.pi / 2 + 0.1])}, 0.8)["r"]
+    assert v == 0.0 and w == 0.5 and ex.turn_backoffs == 1
+    off = Explorer(ExplorationConfig(max_turn_rate=0.5), ["r"])
+    off.last_plan_s, off.goals["r"] = 0.0, ex.goals["r"]
+    assert off.step(grid, {"r": np.array([2.0, 1.02, -np.pi / 2])}, 0.2)["r"][0] == 0.0
+
+
+def test_a_turn_on_the_spot_that_does_not_turn_goes_the_other_way_round_once():
+    """A robot at (2, 2) facing east whose path leads north-west turns left (0.5 rad/s). Its
+    heading stays put: 1.5 s (``turn_stall_time``) after the turn began it is told to turn right,
+    the long way, and keeps that direction; blocked that way too, it is not turned back again.
+    A turn that moves is never reversed."""
+    from mrslam_core.exploration.explorer import Explorer, Goal
+
+    cfg = ExplorationConfig(max_turn_rate=0.5)
+    path = np.array([[1.5, 2.5], [1.0, 3.0], [0.5, 3.5]])
+    grid = _wall_south()
+    ex = Explorer(cfg, ["r"])
+    ex.last_plan_s, ex.goals["r"] = 0.0, Goal(np.array([0.5, 3.5]), path, 0.0)
+    ex.known_at_plan = int(grid.observed.sum())  # no re-assignment: the map does not grow
+    stuck = {"r": np.array([2.0, 2.0, 0.0])}
+    assert ex.step(grid, stuck, 0.2)["r"] == (0.0, 0.5)
+    assert ex.step(grid, stuck, 1.6)["r"] == (0.0, 0.5)  # 1.4 s: not yet
+    assert ex.step(grid, stuck, 1.8)["r"] == (0.0, -0.5) and ex.blocked_turns == 1
+    assert ex.step(grid, {"r": np.array([2.0, 2.0, -0.05])}, 2.0)["r"] == (0.0, -0.5)  # the long way
+    assert ex.step(grid, {"r": np.array([2.0, 2.0, -0.05])}, 3.4)["r"] == (0.0, -0.5) and ex.blocked_turns == 1
+
+    free = Explorer(cfg, ["r"])
+    free.last_plan_s, free.goals["r"] = 0.0, Goal(np.array([0.5, 3.5]), path, 0.0)
+    free.known_at_plan = ex.known_at_plan
+    for i, t in enumerate(np.arange(0.2, 3.0, 0.2)):
+        assert free.step(grid, {"r": np.array([2.0, 2.0, 0.1 * i])}, t)["r"] == (0.0, 0.5)
+    assert free.blocked_turns == 0
