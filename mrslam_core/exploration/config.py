@@ -127,8 +127,9 @@ class ExplorationConfig:
             up to 0.4 m and only where the space behind is free, until they no longer do; a
             turn already begun is not checked again (0: off). The cameras sit 0.12 m ahead of the
             axle and the stereo near limit is 0.21 m from them, so a turn nearer than 0.33 m to
-            a wall is blind; counted as ``turn_backoffs``. On in the team defaults at 0.6 m: no
-            robot above 0.10 m over 28 closed-loop seeds (docs/results.md, session 16).
+            a wall is blind; counted as ``turn_backoffs``. On in the team defaults at 0.6 m: with
+            ``turn_stall_time``, 2 of 78 robots above 0.10 m over 26 closed-loop seeds against 7
+            of 78 without (docs/results.md, session 16).
         turn_stall_time: a robot turning on the spot whose heading moved less than 5° in this
             long is against something (a door jamb, a teammate: its body's corners swing out to
             0.33 m from its axle) and turns the other way round instead, once per turn; counted as
