@@ -95,3 +95,32 @@ def test_a_scan_is_laid_at_the_pose_of_its_own_stamp_not_the_latest():
         assert hit_near(5.0, 7.0)
     finally:
         rclpy.shutdown()
+
+
+def test_the_node_logs_counters_of_either_severity_as_they_grow():
+    """rclpy raises when one call site logs at two severities; a blocked turn (a warning) after a
+    long turn (information) once took the node down mid-run."""
+    import rclpy
+
+    from mrslam_ros.conversions import pose_with_covariance
+    from mrslam_ros.explore_node import EVENTS, ExploreNode
+
+    rclpy.init()
+    try:
+        node = ExploreNode()
+        node.on_pose("robot1", pose_with_covariance(np.array([5.0, 5.0, 0.0]), np.eye(3) * 1e-4, 1, "map"))
+        grown = []
+
+        def step(grid, poses, now):
+            attr = EVENTS[len(grown) % len(EVENTS)][0]
+            setattr(node.explorer, attr, getattr(node.explorer, attr) + 1)
+            grown.append(attr)
+            return {}
+
+        node.explorer.step = step
+        for _ in range(2 * len(EVENTS)):
+            node.control()
+        assert {warn for attr, warn, _ in EVENTS if attr in grown} == {True, False}
+        assert all(getattr(node.explorer, attr) == 2 for attr, _, _ in EVENTS)
+    finally:
+        rclpy.shutdown()
