@@ -290,3 +290,75 @@ def test_a_node_that_starts_after_the_odometry_began_takes_the_start_from_its_hi
         assert pose[2] == pytest.approx(0.94, abs=0.05), dict(slam.diag.drops)
     finally:
         rclpy.shutdown()
+
+
+def test_inputs_whose_publishers_appear_after_the_discovery_wait_still_receive_their_history():
+    """The publishers appear after the node's discovery wait ran out (a slow discovery over UDP,
+    a simulator still loading): the volatile subscription to robot7's odometry becomes
+    transient-local, as its publisher keeps a history, and the first update has the heading of
+    the whole history (0.5 + 0.44 rad); robot6's volatile odometry stays subscribed volatile and
+    is heard."""
+    import rclpy
+    from geometry_msgs.msg import PoseWithCovarianceStamped
+    from nav_msgs.msg import Odometry
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.parameter import Parameter
+    from rclpy.qos import DurabilityPolicy
+    from sensor_msgs.msg import PointCloud2
+
+    from mrslam_core.types import ObservationSet
+    from mrslam_ros.conversions import msg_to_pose, ns_to_stamp, observations_to_cloud, pose_to_msg
+    from mrslam_ros.qos import DEFAULT, OBSERVATION_HISTORY, ODOMETRY_HISTORY
+    from mrslam_ros.slam_node import SlamNode
+
+    rclpy.init()
+    try:
+        slam = SlamNode(parameter_overrides=[
+            Parameter("robots", value=["robot7", "robot6"]),
+            Parameter("start_poses", value=[1.0, 2.0, 0.5, 0.0, 0.0, 0.0]),
+            Parameter("filter.num_particles", value=20),
+            Parameter("max_wait", value=0.5),
+            Parameter("discovery_wait", value=0.1),
+        ])
+        assert all(sub.qos_profile.durability == DurabilityPolicy.VOLATILE for sub in slam.inputs)
+        feeder = rclpy.create_node("feeder")
+        odom = {"robot7": feeder.create_publisher(Odometry, "/robot7/odom", ODOMETRY_HISTORY),
+                "robot6": feeder.create_publisher(Odometry, "/robot6/odom", DEFAULT)}
+        obs_pub = feeder.create_publisher(PointCloud2, "/robot7/observations", OBSERVATION_HISTORY)
+        ex = SingleThreadedExecutor()
+        ex.add_node(slam)
+        ex.add_node(feeder)
+        end = time.time() + 2
+        while time.time() < end and slam._undiscovered - {3}:  # robot6 has no observations publisher
+            ex.spin_once(timeout_sec=0.05)
+        assert slam.inputs[0].qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL
+        assert slam.inputs[1].qos_profile.durability == DurabilityPolicy.VOLATILE
+
+        def odometry(robot: str, i: int) -> None:  # stamp i / 10 s, heading 0.04 i rad
+            m = Odometry()
+            m.header.stamp = ns_to_stamp(i * 100_000_000)
+            m.header.frame_id, m.child_frame_id = f"{robot}/odom", f"{robot}/base_link"
+            m.pose.pose = pose_to_msg(np.array([0.0, 0.0, 0.04 * i]))
+            odom[robot].publish(m)
+
+        for i in range(11):
+            odometry("robot7", i)
+        poses = []
+        feeder.create_subscription(PoseWithCovarianceStamped, "/robot7/pose", poses.append, 10)
+        for _ in range(20):
+            ex.spin_once(timeout_sec=0.01)
+        for i in range(11, 20):
+            odometry("robot7", i)
+            odometry("robot6", i)
+        z = np.array([[2.0, 0.5, 0.3], [3.0, -1.0, 0.8], [2.5, 0.0, 1.2]])
+        for stamp in (1_100_000_000, 1_800_000_000):  # the second makes the first overdue for silent robot6
+            obs_pub.publish(observations_to_cloud(
+                ObservationSet("robot7", stamp, z, np.tile(np.eye(3) * 1e-3, (3, 1, 1))), "robot7/base_link"))
+        end = time.time() + 10
+        while time.time() < end and not (poses and slam.mapper._odom["robot6"]):
+            ex.spin_once(timeout_sec=0.05)
+        assert poses, dict(slam.diag.drops)
+        assert len(slam.mapper._odom["robot6"]) >= 1
+        assert msg_to_pose(poses[0].pose.pose)[2] == pytest.approx(0.94, abs=0.05), dict(slam.diag.drops)
+    finally:
+        rclpy.shutdown()
