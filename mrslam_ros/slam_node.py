@@ -86,9 +86,8 @@ class SlamNodeConfig(CentralConfig):
             and receives what was published before it joined: a node whose subscription matched
             after a robot's odometry began took the first odometry it heard for the robot's start
             pose, and one live faulted run mapped robot1 6.3 deg turned from its first second on
-            (docs/reliability.md). A topic still without a publisher then is subscribed
-            volatile, and again transient-local once its publishers appear keeping a history
-            before it received anything [s].
+            (docs/reliability.md). A topic still without a publisher then is subscribed as
+            soon as its publishers are seen (every 0.2 s), as they offer [s].
     """
 
     map_frame: str = "map"
@@ -140,21 +139,19 @@ class SlamNode(Node):
         #: input subscriptions, odometry first: :meth:`drain` empties them in this order
         # transient-local where every publisher keeps a history: a node that starts late or
         # restarts receives what was published before it joined (qos.py); volatile otherwise, so
-        # any publisher matches. A topic with no publisher yet is subscribed volatile until
-        # :meth:`adapt_inputs` sees its publishers.
+        # any publisher matches. A topic with no publisher yet is subscribed once
+        # :meth:`adapt_inputs` sees its publishers (None until then).
         self._inputs_group = inputs
         self._input_specs = [(Odometry, f"/{r}/odom", partial(self.on_odom, r), 100) for r in robots]
         self._input_specs += [(PointCloud2, f"/{r}/observations", partial(self.on_observations, r),
                                self.cfg.input_depth) for r in robots]
-        #: indices into ``inputs`` of subscriptions made before their topic had a publisher, and
-        #: of those that received a message
+        #: indices into ``inputs`` of topics not subscribed yet, for want of a publisher
         self._undiscovered: set[int] = set()
-        self._heard: set[int] = set()
         self.inputs = [self._subscribe_input(i) for i in range(len(self._input_specs))]
         if self._undiscovered:
             names = [self._input_specs[i][1] for i in sorted(self._undiscovered)]
-            self.get_logger().info(f"no publisher after {self.cfg.discovery_wait:.1f} s for {names}: subscribed "
-                                   "volatile until they appear")
+            self.get_logger().info(f"no publisher after {self.cfg.discovery_wait:.1f} s for {names}: subscribing "
+                                   "each as its publishers appear")
             self._adapt_timer = self.create_timer(0.2, self.adapt_inputs, clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.unknown: set[str] = set()
         self.latency_ms: deque[float] = deque(maxlen=100_000)
@@ -239,6 +236,8 @@ class SlamNode(Node):
         bounded queue drops the oldest and counts them.
         """
         for sub in self.inputs:
+            if sub is None:
+                continue
             for _ in range(self.cfg.input_depth):
                 try:
                     with sub.handle:
@@ -256,42 +255,30 @@ class SlamNode(Node):
             time.sleep(0.05)
 
     def _subscribe_input(self, i: int):
-        """Subscribe input ``i`` of ``_input_specs`` as its publishers offer (see ``inputs``)."""
+        """Subscribe input ``i`` of ``_input_specs`` as its publishers offer (see ``inputs``);
+        None, and left for :meth:`adapt_inputs`, while it has none."""
         from mrslam_ros.qos import adapted_to_publishers
 
         msg_type, topic, callback, depth = self._input_specs[i]
         infos = self.get_publishers_info_by_topic(topic)
-        if infos:
-            self._undiscovered.discard(i)
-        else:
+        if not infos:
             self._undiscovered.add(i)
-
-        def heard(msg, i=i, callback=callback):
-            self._heard.add(i)
-            callback(msg)
-
-        return self.create_subscription(msg_type, topic, heard, adapted_to_publishers(infos, topic, depth),
+            return None
+        self._undiscovered.discard(i)
+        return self.create_subscription(msg_type, topic, callback, adapted_to_publishers(infos, topic, depth),
                                         callback_group=self._inputs_group)
 
     def adapt_inputs(self) -> None:
-        """Once an input subscribed volatile before it had a publisher has them, all keeping a
-        history, and it has received nothing yet: subscribe it again transient-local, so that
-        history (the robot's first odometry, its start) arrives. The simulator creates its
-        publishers seconds before its clock starts."""
-        from rclpy.qos import DurabilityPolicy
-
+        """Subscribe the inputs whose publishers were discovered after the wait. A subscription
+        made before them could not know whether they keep a history: volatile, it would miss
+        what they published before it matched (the simulator's clock may start before a slow
+        discovery ends, and a robot's first odometry is its start); transient-local, it would
+        never match a volatile publisher."""
         for i in sorted(self._undiscovered):
-            infos = self.get_publishers_info_by_topic(self._input_specs[i][1])
-            if not infos:
-                continue
-            self._undiscovered.discard(i)
-            if i in self._heard or not all(p.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL for p in infos):
-                continue
-            old = self.inputs[i]
             self.inputs[i] = self._subscribe_input(i)
-            self.destroy_subscription(old)
-            self.get_logger().info(f"{self._input_specs[i][1]}: publishers appeared, keeping a history; "
-                                   "subscribed transient-local")
+            if self.inputs[i] is not None:
+                self.get_logger().info(f"{self._input_specs[i][1]}: publishers appeared; subscribed "
+                                       f"{self.inputs[i].qos_profile.durability.name.lower()}")
         if not self._undiscovered:
             self._adapt_timer.cancel()
 

@@ -42,8 +42,10 @@ def test_slam_node_tracks_two_robots():
         ex.add_node(slam)
         ex.add_node(feeder)
         end = time.time() + 10
-        while time.time() < end and feeder.count_subscribers("/robot1/observations") == 0:
-            ex.spin_once(timeout_sec=0.05)
+        while time.time() < end and (slam._undiscovered or feeder.count_subscribers("/robot1/observations") == 0):
+            ex.spin_once(timeout_sec=0.05)  # the node subscribes each input once it sees its publishers
+        for _ in range(10):
+            ex.spin_once(timeout_sec=0.02)
         odom = {r: np.zeros(3) for r in world.robots}
         for r in world.robots:  # odometry starts at the start pose, stamp 0
             m = Odometry()
@@ -117,8 +119,10 @@ def test_a_robot_with_an_unknown_start_gets_map_poses_only_once_merged():
         ex.add_node(slam)
         ex.add_node(feeder)
         end = time.time() + 10
-        while time.time() < end and feeder.count_subscribers("/robot2/observations") == 0:
-            ex.spin_once(timeout_sec=0.05)
+        while time.time() < end and (slam._undiscovered or feeder.count_subscribers("/robot1/observations") == 0):
+            ex.spin_once(timeout_sec=0.05)  # the node subscribes each input once it sees its publishers
+        for _ in range(10):
+            ex.spin_once(timeout_sec=0.02)
         odom = {r: np.zeros(3) for r in world.robots}
         for r in world.robots:
             m = Odometry()
@@ -189,8 +193,9 @@ def test_bad_input_is_counted_on_diagnostics_and_the_node_keeps_running():
                 ex.spin_once(timeout_sec=0.01)
 
         end = time.time() + 10
-        while time.time() < end and feeder.count_subscribers("/robot1/observations") == 0:
-            spin(1)
+        while time.time() < end and (slam._undiscovered or feeder.count_subscribers("/robot1/observations") == 0):
+            spin(1)  # the node subscribes each input once it sees its publishers
+        spin(10)
         for t in (0, 10**9, 10**9, 5 * 10**8):  # a duplicate and a backwards stamp
             m = Odometry()
             m.header.stamp = ns_to_stamp(t)
@@ -294,10 +299,10 @@ def test_a_node_that_starts_after_the_odometry_began_takes_the_start_from_its_hi
 
 def test_inputs_whose_publishers_appear_after_the_discovery_wait_still_receive_their_history():
     """The publishers appear after the node's discovery wait ran out (a slow discovery over UDP,
-    a simulator still loading): the volatile subscription to robot7's odometry becomes
-    transient-local, as its publisher keeps a history, and the first update has the heading of
-    the whole history (0.5 + 0.44 rad); robot6's volatile odometry stays subscribed volatile and
-    is heard."""
+    a simulator still loading): each input is subscribed when its publishers are seen, robot7's
+    odometry transient-local (its publisher keeps a history; the first update has the heading of
+    the whole history, 0.5 + 0.44 rad), robot6's volatile odometry volatile (and heard), robot6's
+    observations, with no publisher, not at all."""
     import rclpy
     from geometry_msgs.msg import PoseWithCovarianceStamped
     from nav_msgs.msg import Odometry
@@ -320,19 +325,11 @@ def test_inputs_whose_publishers_appear_after_the_discovery_wait_still_receive_t
             Parameter("max_wait", value=0.5),
             Parameter("discovery_wait", value=0.1),
         ])
-        assert all(sub.qos_profile.durability == DurabilityPolicy.VOLATILE for sub in slam.inputs)
+        assert slam.inputs == [None] * 4
         feeder = rclpy.create_node("feeder")
         odom = {"robot7": feeder.create_publisher(Odometry, "/robot7/odom", ODOMETRY_HISTORY),
                 "robot6": feeder.create_publisher(Odometry, "/robot6/odom", DEFAULT)}
         obs_pub = feeder.create_publisher(PointCloud2, "/robot7/observations", OBSERVATION_HISTORY)
-        ex = SingleThreadedExecutor()
-        ex.add_node(slam)
-        ex.add_node(feeder)
-        end = time.time() + 2
-        while time.time() < end and slam._undiscovered - {3}:  # robot6 has no observations publisher
-            ex.spin_once(timeout_sec=0.05)
-        assert slam.inputs[0].qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL
-        assert slam.inputs[1].qos_profile.durability == DurabilityPolicy.VOLATILE
 
         def odometry(robot: str, i: int) -> None:  # stamp i / 10 s, heading 0.04 i rad
             m = Odometry()
@@ -341,8 +338,16 @@ def test_inputs_whose_publishers_appear_after_the_discovery_wait_still_receive_t
             m.pose.pose = pose_to_msg(np.array([0.0, 0.0, 0.04 * i]))
             odom[robot].publish(m)
 
-        for i in range(11):
+        for i in range(11):  # before the node sees the publisher
             odometry("robot7", i)
+        ex = SingleThreadedExecutor()
+        ex.add_node(slam)
+        ex.add_node(feeder)
+        end = time.time() + 2
+        while time.time() < end and slam._undiscovered - {3}:  # robot6 has no observations publisher
+            ex.spin_once(timeout_sec=0.05)
+        assert slam.inputs[0].qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL
+        assert slam.inputs[1].qos_profile.durability == DurabilityPolicy.VOLATILE and slam.inputs[3] is None
         poses = []
         feeder.create_subscription(PoseWithCovarianceStamped, "/robot7/pose", poses.append, 10)
         for _ in range(20):
