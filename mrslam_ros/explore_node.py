@@ -126,11 +126,12 @@ class ExploreNode(Node):
         commands = ex.step(self.grid, self.poses, self.now_ns * 1e-9)
         for attr, warn, what in EVENTS:
             if getattr(ex, attr) > before[attr]:
+                msg = f"{what}: {getattr(ex, attr)} so far"
                 # one call site per severity: rclpy refuses a site whose severity changes
                 if warn:
-                    self.get_logger().warning(f"{what}: {getattr(ex, attr)} so far")
+                    self.get_logger().warning(msg)
                 else:
-                    self.get_logger().info(f"{what}: {getattr(ex, attr)} so far")
+                    self.get_logger().info(msg)
         if ex.held > before["held"]:
             self.get_logger().info(f"a robot waits for another in its way (keep_clear); {ex.held} commands held so far",
                                    throttle_duration_sec=5.0)

@@ -145,13 +145,10 @@ class SlamNode(Node):
         self._input_specs = [(Odometry, f"/{r}/odom", partial(self.on_odom, r), 100) for r in robots]
         self._input_specs += [(PointCloud2, f"/{r}/observations", partial(self.on_observations, r),
                                self.cfg.input_depth) for r in robots]
-        #: indices into ``inputs`` of topics not subscribed yet, for want of a publisher
-        self._undiscovered: set[int] = set()
         self.inputs = [self._subscribe_input(i) for i in range(len(self._input_specs))]
-        if self._undiscovered:
-            names = [self._input_specs[i][1] for i in sorted(self._undiscovered)]
-            self.get_logger().info(f"no publisher after {self.cfg.discovery_wait:.1f} s for {names}: subscribing "
-                                   "each as its publishers appear")
+        if self.unsubscribed:
+            self.get_logger().info(f"no publisher after {self.cfg.discovery_wait:.1f} s for {self.unsubscribed}: "
+                                   "subscribing each as its publishers appear")
             self._adapt_timer = self.create_timer(0.2, self.adapt_inputs, clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.unknown: set[str] = set()
         self.latency_ms: deque[float] = deque(maxlen=100_000)
@@ -262,9 +259,7 @@ class SlamNode(Node):
         msg_type, topic, callback, depth = self._input_specs[i]
         infos = self.get_publishers_info_by_topic(topic)
         if not infos:
-            self._undiscovered.add(i)
             return None
-        self._undiscovered.discard(i)
         return self.create_subscription(msg_type, topic, callback, adapted_to_publishers(infos, topic, depth),
                                         callback_group=self._inputs_group)
 
@@ -274,13 +269,18 @@ class SlamNode(Node):
         what they published before it matched (the simulator's clock may start before a slow
         discovery ends, and a robot's first odometry is its start); transient-local, it would
         never match a volatile publisher."""
-        for i in sorted(self._undiscovered):
-            self.inputs[i] = self._subscribe_input(i)
-            if self.inputs[i] is not None:
+        for i, sub in enumerate(self.inputs):
+            if sub is None and (sub := self._subscribe_input(i)) is not None:
+                self.inputs[i] = sub
                 self.get_logger().info(f"{self._input_specs[i][1]}: publishers appeared; subscribed "
-                                       f"{self.inputs[i].qos_profile.durability.name.lower()}")
-        if not self._undiscovered:
+                                       f"{sub.qos_profile.durability.name.lower()}")
+        if not self.unsubscribed:
             self._adapt_timer.cancel()
+
+    @property
+    def unsubscribed(self) -> list[str]:
+        """The input topics not subscribed yet, for want of a publisher."""
+        return [spec[1] for spec, sub in zip(self._input_specs, self.inputs) if sub is None]
 
     def _log_merges(self) -> None:
         for m in self.mapper.merges[self._merges_logged:]:
