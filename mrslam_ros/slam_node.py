@@ -145,7 +145,9 @@ class SlamNode(Node):
         self._input_specs = [(Odometry, f"/{r}/odom", partial(self.on_odom, r), 100) for r in robots]
         self._input_specs += [(PointCloud2, f"/{r}/observations", partial(self.on_observations, r),
                                self.cfg.input_depth) for r in robots]
-        self.inputs = [self._subscribe_input(i) for i in range(len(self._input_specs))]
+        self.inputs: list = []
+        for i in range(len(self._input_specs)):
+            self.inputs.append(self._subscribe_input(i))
         if self.unsubscribed:
             self.get_logger().info(f"no publisher after {self.cfg.discovery_wait:.1f} s for {self.unsubscribed}: "
                                    "subscribing each as its publishers appear")
@@ -253,13 +255,15 @@ class SlamNode(Node):
 
     def _subscribe_input(self, i: int):
         """Subscribe input ``i`` of ``_input_specs`` as its publishers offer (see ``inputs``);
-        None, and left for :meth:`adapt_inputs`, while it has none."""
+        None, and left for :meth:`adapt_inputs`, while it has none or, for a robot's observation
+        sets, while its odometry is not subscribed."""
         from mrslam_ros.qos import adapted_to_publishers
 
         msg_type, topic, callback, depth = self._input_specs[i]
         infos = self.get_publishers_info_by_topic(topic)
-        if not infos:
-            return None
+        robots = len(self.mapper.robots)
+        if not infos or (i >= robots and self.inputs[i - robots] is None):
+            return None  # a robot's sets wait for its odometry: without it they would be dropped
         return self.create_subscription(msg_type, topic, callback, adapted_to_publishers(infos, topic, depth),
                                         callback_group=self._inputs_group)
 
