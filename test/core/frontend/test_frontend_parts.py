@@ -7,6 +7,7 @@ import pytest
 
 from mrslam_core.configio import ConfigError, from_dict, to_dict
 from mrslam_core.frontend import Frontend, FrontendConfig
+from mrslam_core.frontend.features import harris
 from mrslam_core.frontend.obstacles import scan_from_points
 from mrslam_core.frontend.tracking import Tracker, select_spread
 from mrslam_core.frontend.usurf import haar_responses, usurf
@@ -36,6 +37,37 @@ def test_usurf_unit_and_invariant_to_gain_and_offset(textured):
     edge[:, 40:] = 200
     e = usurf(edge, np.array([[40.0, 40.0]]), 1.2)[0].reshape(16, 4)
     assert np.all(e[:, 2:] == 0) and np.all(e[:, 0] >= 0) and e[:, 0].sum() > 0.5
+
+
+def _corners_found(kps, squares) -> list[int]:
+    """How many of each square's (x0, y0, x1, y1) 4 corners have a keypoint within 1.5 px."""
+    found = []
+    for x0, y0, x1, y1 in squares:
+        corners = np.array([[x0, y0], [x1, y0], [x0, y1], [x1, y1]], float) - 0.5
+        d = np.linalg.norm(kps.xy[:, None] - corners[None], axis=2)
+        found.append(int((d.min(axis=0) <= 1.5).sum()))
+    return found
+
+
+def test_a_dim_half_of_the_image_keeps_its_corners_with_the_cell_floor():
+    """A white square on black in the left half, a square 40 grey levels above its background in
+    the right half. Harris grows with contrast^4 ((40/255)^4 = 6e-4 of the strongest): one threshold
+    for the image (1 % of its strongest) keeps only the white square's corners; thresholds per cell
+    of a 2 x 1 grid, floored at 1e-4 of the image's strongest, keep both squares'; a floor above
+    6e-4 drops the dim one again."""
+    img = np.zeros((60, 120), np.uint8)
+    img[:, 60:] = 100
+    img[20:40, 20:40] = 255
+    img[20:40, 80:100] = 140
+    squares = [(20, 20, 40, 40), (80, 20, 100, 40)]
+    grid = dict(grid_cols=2, grid_rows=1)
+    image_wide = harris(img, FrontendConfig(**grid), margin=5)
+    assert _corners_found(image_wide, squares) == [4, 0] and len(image_wide) == 4
+    per_cell = harris(img, FrontendConfig(harris_cell_floor=1e-4, **grid), margin=5)
+    assert _corners_found(per_cell, squares) == [4, 4] and len(per_cell) == 8
+    assert _corners_found(harris(img, FrontendConfig(harris_cell_floor=1e-3, **grid), margin=5), squares) == [4, 0]
+    with pytest.raises(ValueError, match="harris_cell_floor"):
+        FrontendConfig(harris_cell_floor=0.02)
 
 
 def test_tracker_keeps_ids_and_counts_consecutive_frames():
