@@ -171,6 +171,22 @@ class Simulation:
         """(3,) true pose (x, y, θ) of base_link in the map [m, m, rad]."""
         return self._truth[self._index(name)].copy()
 
+    def place(self, name: str, pose: np.ndarray) -> None:
+        """Put robot ``name`` at ``pose`` (x, y, θ) in the map [m, m, rad], at rest, as if carried
+        there: its odometry does not see the move (replaying recorded ground truth for renders).
+
+        Raises:
+            SimError: unknown name or a pose that is not 3 finite numbers.
+        """
+        i = self._index(name)
+        pose = np.asarray(pose, dtype=float).reshape(-1)
+        if pose.shape != (3,) or not np.isfinite(pose).all():
+            raise SimError(f"pose must be 3 finite numbers, got {pose!r}")
+        self._place(self._bodies[i], pose)
+        self._truth[i] = pose
+        self._vel[i] = 0.0
+        self._truth_twist[i] = 0.0
+
     def ground_truth_twist(self, name: str) -> np.ndarray:
         """(2,) true (v, ω) of base_link over the last physics step [m/s, rad/s]."""
         return self._truth_twist[self._index(name)].copy()

@@ -223,6 +223,23 @@ def test_laser_scan_sees_walls_and_robots():
         assert sim.laser_scan("r", num_beams=1, fov=0.01, max_range=0.5)[0] == 0.5
 
 
+def test_a_placed_robot_is_there_at_rest_and_its_odometry_did_not_move():
+    with Simulation(FAST) as sim:
+        sim.add_robot("r", np.array([1.0, 1.0, 0.0]))
+        sim.set_command("r", 0.3, 0.0)
+        sim.step()
+        odom = sim.odometry("r")[0]
+        sim.place("r", np.array([2.0, 2.0, np.pi]))
+        assert sim.ground_truth("r") == pytest.approx([2.0, 2.0, np.pi])
+        assert sim.laser_scan("r", num_beams=1, fov=0.01)[0] == pytest.approx(2.0 - 0.05, abs=1e-3)  # the west wall
+        sim.set_command("r", 0.0, 0.0)
+        sim.step()
+        assert sim.ground_truth("r") == pytest.approx([2.0, 2.0, np.pi])
+        assert sim.odometry("r")[0] == pytest.approx(odom)
+        with pytest.raises(SimError, match="3 finite numbers"):
+            sim.place("r", np.array([np.nan, 0.0, 0.0]))
+
+
 def test_bad_input():
     with Simulation(FAST) as sim:
         sim.add_robot("r")
