@@ -23,8 +23,7 @@ from mrslam_core.configio import from_dict
 from mrslam_core.evaluation.metrics import interpolate_poses
 from mrslam_core.evaluation.tum import read_tum
 from mrslam_core.experiments._output import write_tables
-from mrslam_core.frontend import Frontend, FrontendConfig, StereoRig, image_to_grey
-from mrslam_core.frontend.matching import match_stereo
+from mrslam_core.frontend import Frontend, FrontendConfig, StereoRig
 from mrslam_core.pipelines.team import TeamConfig
 from mrslam_core.sim.simulation import Simulation
 
@@ -71,13 +70,9 @@ def stage_counts(run: Path, robot: str, start: float, end: float, frontend: Fron
                 rows.append({"t": float(stamp), "dropped": dict(fe.drops)})
                 continue
             last = fe.last_frame
-            left, right = rig.rectify(*(image_to_grey(x, frame.encoding)[0] for x in (frame.left, frame.right)))
-            keypoints = fe.features.detect(left, fe._margin)
-            matches = match_stereo(left, right, keypoints.xy, frontend)
-            pose = sim.ground_truth(robot)
             rows.append({
-                "t": float(stamp), "pose": [float(v) for v in pose], "keypoints": len(keypoints),
-                "stereo": len(matches.index), "in_depth": len(last.xy),
+                "t": float(stamp), "pose": [float(v) for v in sim.ground_truth(robot)], "keypoints": last.detected,
+                "stereo": last.matched, "in_depth": len(last.xy),
                 "tracked_2": int((last.track_length >= 2).sum()),
                 "tracked_min": int((last.track_length >= frontend.min_track_length).sum()),
                 "published": len(obs),

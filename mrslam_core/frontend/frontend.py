@@ -48,6 +48,8 @@ class StereoFrame:
         descriptors: (M, D) unit float32.
         track_ids: (M,) int64.
         track_length: (M,) consecutive frames seen, this one included.
+        detected: keypoints the detector found in the left image (before stereo matching).
+        matched: of those, the ones stereo matching accepted (before the depth limits).
     """
 
     xy: np.ndarray
@@ -58,6 +60,8 @@ class StereoFrame:
     descriptors: np.ndarray
     track_ids: np.ndarray
     track_length: np.ndarray
+    detected: int = 0
+    matched: int = 0
 
 
 def image_to_grey(image: object, encoding: str | None) -> tuple[np.ndarray | None, str]:
@@ -211,4 +215,4 @@ class Frontend:
         points = triangulate(*args)
         cov = triangulation_covariance(*args, cfg.sigma_d, cfg.sigma_r, cfg.sigma_c)
         ids, length = self.tracker.update(xy, desc, points, cov)
-        return StereoFrame(xy, d, strength, points, cov, desc, ids, length)
+        return StereoFrame(xy, d, strength, points, cov, desc, ids, length, len(kps), len(m.index))

@@ -130,9 +130,7 @@ class Simulation:
             if len(self._names) >= len(self.world.start_poses):
                 raise SimError(f"world {self.world.name} has only {len(self.world.start_poses)} start poses")
             start_pose = self.world.start_poses[len(self._names)]
-        start = np.asarray(start_pose, dtype=float).reshape(-1)
-        if start.shape != (3,) or not np.isfinite(start).all():
-            raise SimError(f"start pose must be 3 finite numbers, got {start_pose!r}")
+        start = _pose3(start_pose, "start pose")
         body = p.loadURDF(str(self._urdf), [start[0], start[1], 0.0], p.getQuaternionFromEuler([0, 0, start[2]]),
                           physicsClientId=self.client)
         p.changeDynamics(body, -1, linearDamping=0, angularDamping=0, lateralFriction=0.0,
@@ -179,9 +177,7 @@ class Simulation:
             SimError: unknown name or a pose that is not 3 finite numbers.
         """
         i = self._index(name)
-        pose = np.asarray(pose, dtype=float).reshape(-1)
-        if pose.shape != (3,) or not np.isfinite(pose).all():
-            raise SimError(f"pose must be 3 finite numbers, got {pose!r}")
+        pose = _pose3(pose, "pose")
         self._place(self._bodies[i], pose)
         self._truth[i] = pose
         self._vel[i] = 0.0
@@ -409,3 +405,11 @@ class Simulation:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def _pose3(value: object, what: str) -> np.ndarray:
+    """``value`` as a (3,) float pose (x, y, θ); SimError unless it is 3 finite numbers."""
+    pose = np.asarray(value, dtype=float).reshape(-1)
+    if pose.shape != (3,) or not np.isfinite(pose).all():
+        raise SimError(f"{what} must be 3 finite numbers, got {value!r}")
+    return pose
