@@ -14,13 +14,12 @@ pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
 BIN = Path(sys.executable).parent
 
-# Issue 6's target is ATE <= 0.10 m and <= 30 % of odometry for every robot. It is not met in every
-# run: live runs are not repeatable (DDS and thread timing change the exploration paths) and the
-# filter still loses a heading where nothing mapped is in view. Closed-loop runs of the demo's team
-# over fresh seeds 28-51 met it in 22 of 24 (docs/results.md, session 17), a miss in about one run
-# in twelve, which an assertion here would turn into a CI failure as often. What every run so far
-# held is the team as a whole better than its dead reckoning, which is what this test asserts.
-TEAM_OVER_ODOM = 1.0
+# Issue 6's target, for every robot: ATE RMSE <= 0.10 m and <= 30 % of its odometry's ATE RMSE.
+# Live runs are not repeatable (DDS and thread timing change the exploration paths); live demos of
+# these defaults met it in 34 of 35 runs (docs/results.md, sessions 17 and 18). The miss: a robot
+# 2 degrees off after a turn mapped its teammates' corridor again instead of matching it.
+MAX_ATE_M = 0.10
+MAX_ATE_OVER_ODOM = 0.30
 
 
 @pytest.fixture(scope="module")
@@ -44,9 +43,9 @@ def test_the_team_is_localised_against_ground_truth(demo_run):
     assert sorted(report["robots"]) == ["robot1", "robot2", "robot3"]
     for name, r in report["robots"].items():
         assert r["poses"] >= 0.8 * 5 * 120, (name, r["poses"])  # 5 Hz frames, nearly all used
-    robots = report["robots"].values()
-    assert sum(r["ate_rmse_m"] for r in robots) <= TEAM_OVER_ODOM * sum(r["odom_ate_rmse_m"] for r in robots), report["robots"]
-    # robots that stop at door frames (no-slip simulator) explored 46-83 % of the office in 120 s
+        assert r["ate_rmse_m"] <= MAX_ATE_M, (name, r)
+        assert r["ate_rmse_m"] <= MAX_ATE_OVER_ODOM * r["odom_ate_rmse_m"], (name, r)
+    # the 35 live demos of sessions 17 and 18 explored 39-75 % of the office in 120 s
     assert report["explored_fraction"] > 0.35
 
 
