@@ -243,6 +243,10 @@ class SlamNode(Node):
                         got = sub.handle.take_message(sub.msg_type, sub.raw)
                 except InvalidHandle:  # destroyed at shutdown
                     return
+                except RuntimeError as exc:  # a sample rclpy cannot convert (see spin.run_node)
+                    self.get_logger().error(f"dropped a message that could not be taken: {exc}")
+                    self.diag.count("untakeable_message", str(exc))
+                    break
                 if got is None:
                     break
                 sub.callback(got[0])
