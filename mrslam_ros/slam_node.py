@@ -57,7 +57,7 @@ from mrslam_ros.conversions import (
 )
 from mrslam_ros.diagnostics import Diagnostics
 from mrslam_ros.params import declare_config, read_config
-from mrslam_ros.spin import run_node
+from mrslam_ros.spin import drop_untakeable, run_node
 
 _OBS_TOPIC = re.compile(r"^/([^/]+)/observations$")
 
@@ -243,9 +243,8 @@ class SlamNode(Node):
                         got = sub.handle.take_message(sub.msg_type, sub.raw)
                 except InvalidHandle:  # destroyed at shutdown
                     return
-                except RuntimeError as exc:  # a sample rclpy cannot convert (see spin.run_node)
-                    self.get_logger().error(f"dropped a message that could not be taken: {exc}")
-                    self.diag.count("untakeable_message", str(exc))
+                except RuntimeError as exc:  # a sample rclpy cannot convert
+                    drop_untakeable(self, exc)
                     break
                 if got is None:
                     break

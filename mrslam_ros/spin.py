@@ -32,18 +32,23 @@ def run_node(make: Callable[[], Node], argv: list[str] | None = None, threads: i
                 except RuntimeError as exc:
                     if not failed_take(exc):
                         raise
-                    # seen after a process was stopped (SIGSTOP) for 30 s and under heavy load:
-                    # the middleware hands over a sample rclpy cannot convert; drop it, go on
-                    node.get_logger().error(f"dropped a message that could not be taken: {exc}")
-                    diag = getattr(node, "diag", None)
-                    if diag is not None:
-                        diag.count("untakeable_message", str(exc))
+                    drop_untakeable(node, exc)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
         node.destroy_node()
         rclpy.try_shutdown()
     return 0
+
+
+def drop_untakeable(node: Node, exc: BaseException) -> None:
+    """Log and count (``untakeable_message`` on the node's ``diag``, if it has one) a message the
+    middleware handed over but rclpy could not convert, seen after a process was stopped (SIGSTOP)
+    for 30 s, under heavy load and across network namespaces; the caller drops it and goes on."""
+    node.get_logger().error(f"dropped a message that could not be taken: {exc}")
+    diag = getattr(node, "diag", None)
+    if diag is not None:
+        diag.count("untakeable_message", str(exc))
 
 
 def failed_take(exc: BaseException) -> bool:
