@@ -367,3 +367,60 @@ def test_inputs_whose_publishers_appear_after_the_discovery_wait_still_receive_t
         assert msg_to_pose(poses[0].pose.pose)[2] == pytest.approx(0.94, abs=0.05), dict(slam.diag.drops)
     finally:
         rclpy.shutdown()
+
+
+def test_observation_sets_kept_before_the_odometry_are_taken_only_once_it_is_heard():
+    """A restarted node receives two histories, the frontend's sets and the simulator's odometry,
+    each whenever its own subscription matches. Taken first, the sets are overdue at once (the
+    newest is seconds ahead of the oldest) and had no odometry: one CI run's resumed node dropped
+    3.4 s of robot1's as ``no_odometry_at_stamp``. Here robot4's ten sets (0.1-1.0 s) are kept
+    by their publisher before any odometry exists; the node subscribes them only once robot4's
+    odometry is heard, and all ten are used (before: 6 of the 10 dropped, max_wait 0.3 s)."""
+    import rclpy
+    from nav_msgs.msg import Odometry
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.parameter import Parameter
+    from sensor_msgs.msg import PointCloud2
+
+    from mrslam_core.types import ObservationSet
+    from mrslam_ros.conversions import ns_to_stamp, observations_to_cloud, pose_to_msg
+    from mrslam_ros.qos import OBSERVATION_HISTORY, ODOMETRY_HISTORY
+    from mrslam_ros.slam_node import SlamNode
+
+    rclpy.init()
+    try:
+        feeder = rclpy.create_node("feeder")
+        odom_pub = feeder.create_publisher(Odometry, "/robot4/odom", ODOMETRY_HISTORY)
+        obs_pub = feeder.create_publisher(PointCloud2, "/robot4/observations", OBSERVATION_HISTORY)
+        z = np.array([[2.0, 0.5, 0.3], [3.0, -1.0, 0.8], [2.5, 0.0, 1.2]])
+        for k in range(1, 11):
+            obs_pub.publish(observations_to_cloud(
+                ObservationSet("robot4", k * 100_000_000, z, np.tile(np.eye(3) * 1e-3, (3, 1, 1))), "robot4/base_link"))
+        slam = SlamNode(parameter_overrides=[
+            Parameter("robots", value=["robot4"]),
+            Parameter("filter.num_particles", value=20),
+            Parameter("max_wait", value=0.3),
+            Parameter("discovery_wait", value=1.0),
+        ])
+        assert slam.inputs[0] is not None and slam.inputs[1] is None  # odometry subscribed, sets not yet
+        ex = SingleThreadedExecutor()
+        ex.add_node(slam)
+        ex.add_node(feeder)
+        end = time.time() + 0.5
+        while time.time() < end:
+            ex.spin_once(timeout_sec=0.05)
+        assert slam.inputs[1] is None and slam.mapper.queued == 0
+        for i in range(13):  # stamp i / 10 s, driving 0.1 m per step
+            m = Odometry()
+            m.header.stamp = ns_to_stamp(i * 100_000_000)
+            m.header.frame_id, m.child_frame_id = "robot4/odom", "robot4/base_link"
+            m.pose.pose = pose_to_msg(np.array([0.1 * i, 0.0, 0.0]))
+            odom_pub.publish(m)
+        end = time.time() + 10
+        while time.time() < end and len(slam.mapper.trajectory["robot4"]) < 10:
+            ex.spin_once(timeout_sec=0.05)
+        drops = dict(slam.diag.drops)
+        assert drops.get("no_odometry_at_stamp", 0) == 0, drops
+        assert len(slam.mapper.trajectory["robot4"]) == 10, drops
+    finally:
+        rclpy.shutdown()
