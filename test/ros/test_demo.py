@@ -16,7 +16,7 @@ BIN = Path(sys.executable).parent
 
 # Issue 6's target, for every robot: ATE RMSE <= 0.10 m and <= 30 % of its odometry's ATE RMSE.
 # Live runs are not repeatable (DDS and thread timing change the exploration paths); live demos of
-# these defaults met it in 35 of 36 runs (docs/results.md, sessions 17 and 18). The miss: a robot
+# these defaults met it in 37 of 38 runs (docs/results.md, sessions 17-19). The miss: a robot
 # 2 degrees off after a turn mapped its teammates' corridor again instead of matching it.
 MAX_ATE_M = 0.10
 MAX_ATE_OVER_ODOM = 0.30
