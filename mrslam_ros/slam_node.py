@@ -140,7 +140,7 @@ class SlamNode(Node):
         #: input subscriptions, odometry first: :meth:`drain` empties them in this order
         # transient-local where every publisher keeps a history: a node that starts late or
         # restarts receives what was published before it joined (qos.py); volatile otherwise, so
-        # any publisher matches. A topic with no publisher yet, or a robot's sets before its
+        # any publisher matches. A topic with no publisher yet, or a robot's kept sets before its
         # odometry is heard, is subscribed later by :meth:`adapt_inputs` (None until then).
         self._inputs_group = inputs
         self._input_specs = [(Odometry, f"/{r}/odom", partial(self.on_odom, r), 100) for r in robots]
