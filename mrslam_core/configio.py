@@ -152,17 +152,44 @@ def to_dict(obj: Any) -> Any:
     return obj
 
 
-def load_yaml(cls: type[T], path: str | Path) -> T:
-    """Read a YAML file into dataclass ``cls`` (see :func:`from_dict`)."""
-    path = Path(path)
+def _read_mapping(path: Path) -> dict:
     try:
         data = yaml.safe_load(path.read_text()) or {}
     except yaml.YAMLError as exc:
         raise ConfigError(f"{path}: not valid YAML: {exc}") from exc
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot read: {exc.strerror}") from exc
     if not isinstance(data, dict):
         raise ConfigError(f"{path}: the top level must be a mapping")
+    return data
+
+
+def load_yaml(cls: type[T], path: str | Path) -> T:
+    """Read a YAML file into dataclass ``cls`` (see :func:`from_dict`)."""
+    path = Path(path)
     try:
-        return from_dict(cls, data)
+        return from_dict(cls, _read_mapping(path))
+    except ConfigError as exc:
+        raise ConfigError(f"{path}: {exc}") from exc
+
+
+def load_profile(cls: type[T], path: str | Path, overrides: dict[str, Any] | None = None) -> T:
+    """Read a named profile into dataclass ``cls``: the sections of the profile that are fields of
+    ``cls``, then ``overrides`` (a nested mapping) on top.
+
+    A profile (config/*.yaml) is a ROS params file (``/**: ros__parameters: {...}``), so the
+    launcher hands the same file to every node: each node, and each offline pipeline, takes the
+    sections (``frontend``, ``filter``, ``exploration``, ...) its config has. Within a section,
+    keys are checked strictly (:func:`from_dict`).
+    """
+    path = Path(path)
+    data = _read_mapping(path)
+    if set(data) == {"/**"}:
+        data = (data["/**"] or {}).get("ros__parameters", {}) or {}
+    names = {f.name for f in dataclasses.fields(cls)}  # type: ignore[arg-type]
+    picked = {k: v for k, v in data.items() if k in names}
+    try:
+        return from_dict(cls, _overlay(picked, overrides or {}))
     except ConfigError as exc:
         raise ConfigError(f"{path}: {exc}") from exc
 

@@ -14,6 +14,7 @@ COMMANDS = {
     "launch": ("mrslam_ros.launch", "start the nodes a config YAML lists"),
     "replay": ("mrslam_ros.replay", "play a rosbag2 recording into the nodes (or --offline)"),
     "mrclam": ("mrslam_core.pipelines.mrclam", "run the filter on a UTIAS MR.CLAM dataset"),
+    "dataset": ("mrslam_ros.dataset_cli", "public stereo datasets (KITTI, EuRoC): import into a bag, or run"),
     "team": ("mrslam_core.pipelines.team", "a simulated team, closed loop, in one process (no ROS)"),
     "bench": ("mrslam_core.bench", "benchmarks: mrslam bench {filter,frontend,sim,...}"),
     "experiment": ("mrslam_core.experiments", "reproducible experiments behind docs/results.md"),

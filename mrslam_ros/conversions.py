@@ -369,6 +369,47 @@ def pose_to_odometry(pose: np.ndarray, cov: np.ndarray, stamp_ns: int, frame_id:
     return msg
 
 
+def visual_odometry_msg(vo, pose_cov: np.ndarray, dt: float, frame_id: str, child_frame_id: str) -> Odometry:
+    """The frontend's visual odometry after a frame -> nav_msgs/Odometry.
+
+    Args:
+        vo: :class:`mrslam_core.frontend.frontend.VisualOdometry` (pose, delta, 6 × 6 covariance of
+            the delta over (δθ, δt)).
+        pose_cov: (3, 3) covariance of the planar pose (x, y, yaw), accumulated by the caller.
+        dt: time since the previous frame [s] (the twist is the delta over it).
+        frame_id, child_frame_id: the odometry frame and base_link.
+
+    Returns:
+        The full 3D pose with the planar covariance in its x, y, yaw entries, and the body twist
+        (delta / dt, the rotation as a rotation vector) with its 6 × 6 covariance in ROS's order
+        (vx, vy, vz, ωx, ωy, ωz) [m/s, rad/s].
+    """
+    from scipy.spatial.transform import Rotation
+
+    msg = Odometry()
+    msg.header.stamp = ns_to_stamp(int(vo.stamp_ns))
+    msg.header.frame_id, msg.child_frame_id = frame_id, child_frame_id
+    pose = np.asarray(vo.pose, float)
+    p, o = msg.pose.pose.position, msg.pose.pose.orientation
+    p.x, p.y, p.z = (float(v) for v in pose[:3, 3])
+    o.x, o.y, o.z, o.w = (float(v) for v in Rotation.from_matrix(pose[:3, :3]).as_quat())
+    msg.pose.covariance = _planar_cov6(pose_cov)
+    if dt > 0:
+        delta = np.asarray(vo.delta, float)
+        rv = Rotation.from_matrix(delta[:3, :3]).as_rotvec()
+        lin, ang = msg.twist.twist.linear, msg.twist.twist.angular
+        lin.x, lin.y, lin.z = (float(v) / dt for v in delta[:3, 3])
+        ang.x, ang.y, ang.z = (float(v) / dt for v in rv)
+        order = [3, 4, 5, 0, 1, 2]  # (δθ, δt) -> ROS (linear, angular)
+        msg.twist.covariance = (np.asarray(vo.cov, float)[np.ix_(order, order)] / dt**2).ravel().tolist()
+    return msg
+
+
+def odometry_twist_covariance(msg: Odometry) -> np.ndarray:
+    """(3, 3) covariance of the planar body twist (vx, vy, ωz) of a nav_msgs/Odometry."""
+    return _cov6_to_planar(msg.twist.covariance, "twist")
+
+
 def pose_with_covariance_to_pose(msg: PoseWithCovarianceStamped) -> tuple[int, np.ndarray, np.ndarray]:
     """PoseWithCovarianceStamped -> (stamp [ns], planar pose (3,), covariance (3, 3) of x, y, yaw)."""
     pose = msg_to_pose(msg.pose.pose)

@@ -8,7 +8,8 @@ pair's stamp, and the SLAM node stamps the pose of that set with it): the latest
 or two older than a new scan, and a robot turning at 0.5 rad/s would lay its scans 3-6° off,
 eroding the walls at door frames that the planner then cuts through. A scan whose pose never
 comes (its set dropped by the SLAM node) is counted, not inserted. Publishes ``/map``
-(OccupancyGrid), ``/<robot>/cmd_vel`` and ``/<robot>/goal`` on a timer.
+(OccupancyGrid; the grid grows with the scans, and info.origin, width and height with it),
+``/<robot>/cmd_vel`` and ``/<robot>/goal`` on a timer.
 """
 
 from __future__ import annotations
@@ -154,6 +155,9 @@ class ExploreNode(Node):
                 self.goal_pub[robot].publish(msg)
 
     def publish_map(self) -> None:
+        """The grid as it is now: its size and origin follow its growth; nothing before the first scan."""
+        if not self.grid.observed.size:
+            return
         self.map_pub.publish(occupancy_msg(self.grid.probability(), self.grid.observed, self.grid.origin,
                                            self.grid.res, self.now_ns, self.cfg.map_frame))
 

@@ -4,8 +4,11 @@ Subscribes ``stereo/{left,right}/image_raw`` and ``stereo/{left,right}/camera_in
 right images whose stamps differ by at most ``max_skew_ns`` (approximate-time sync of
 :mod:`mrslam_ros.sync`, since message_filters is not on PyPI) with the latest camera_info of each
 side, runs :class:`mrslam_core.frontend.frontend.Frontend`, and publishes
-``observations`` (PointCloud2 in ``<robot>/base_link``) and ``scan`` (the pseudo laser scan for the
-occupancy grid, LaserScan in ``<robot>/base_link``). A frame without usable points still gives an
+``observations`` (PointCloud2 in ``<robot>/base_link``), ``scan`` (the pseudo laser scan for the
+occupancy grid, LaserScan in ``<robot>/base_link``) and ``visual_odom`` (nav_msgs/Odometry of
+base_link in ``<robot>/visual_odom``, base_link at the first frame: the frontend's visual odometry,
+with the planar pose covariance and the body twist's covariance; frames whose motion could not be
+estimated are counted as ``vo_failures``). A frame without usable points still gives an
 (empty) observation set, so the central node knows the robot is alive. Drops are counted and
 published on ``/diagnostics``, never raised: missing or bad camera_info, unpaired, late or
 duplicated images, wrong encodings or sizes, and whatever the frontend itself rejects.
@@ -17,12 +20,14 @@ import sys
 from dataclasses import dataclass, field
 
 import numpy as np
+from nav_msgs.msg import Odometry
 from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo, Image, LaserScan, PointCloud2
 
 from mrslam_core.frontend.camera import StereoRig
 from mrslam_core.frontend.config import FrontendConfig
 from mrslam_core.frontend.errors import FrontendError
+from mrslam_core.geometry.se2 import planar_from_matrix
 from mrslam_ros.conversions import (
     ConversionError,
     camera_info_to_calibration,
@@ -30,6 +35,7 @@ from mrslam_ros.conversions import (
     obstacle_scan_to_laser,
     observations_to_cloud,
     stamp_to_ns,
+    visual_odometry_msg,
 )
 from mrslam_ros.diagnostics import Diagnostics
 from mrslam_ros.params import declare_config, read_config
@@ -74,6 +80,9 @@ class FrontendNode(Node):
         self._rig_key = None
         self.pub = self.create_publisher(PointCloud2, "observations", OBSERVATION_HISTORY)
         self.scan_pub = self.create_publisher(LaserScan, "scan", 10)
+        self.vo_pub = self.create_publisher(Odometry, "visual_odom", 50)
+        self._vo_cov = np.zeros((3, 3))  # the planar pose covariance of the visual odometry
+        self._vo_stamp: int | None = None
         for i, side in enumerate(("left", "right")):
             self.create_subscription(CameraInfo, f"stereo/{side}/camera_info", lambda m, s=side: self.infos.__setitem__(s, m), 10)
             self.create_subscription(Image, f"stereo/{side}/image_raw", lambda m, i=i: self.on_image(i, m), 10)
@@ -119,10 +128,27 @@ class FrontendNode(Node):
                                        right_stamp_ns=stamp_to_ns(right.header.stamp), encoding=left.encoding,
                                        right_encoding=right.encoding)
         self.diag.mirror(self.frontend.drops, "frontend_", "rejected by the frontend")
+        self.diag.mirror({"vo_failures": self.frontend.vo_failures}, "", "frames whose motion the visual odometry "
+                         "could not estimate (the constant-velocity prediction stood in)")
         if obs is not None:
+            self.publish_visual_odometry()
             self.pub.publish(observations_to_cloud(obs, f"{self.cfg.robot}/base_link"))
         if scan is not None:
             self.scan_pub.publish(obstacle_scan_to_laser(scan, f"{self.cfg.robot}/base_link"))
+
+
+    def publish_visual_odometry(self) -> None:
+        """The frame's visual odometry on ``visual_odom`` (odom frame ``<robot>/visual_odom``)."""
+        from mrslam_core.pipelines.odometry import propagate_planar
+
+        vo = self.frontend.odometry
+        dt = 0.0 if self._vo_stamp is None else (vo.stamp_ns - self._vo_stamp) * 1e-9
+        prev = planar_from_matrix(vo.pose @ np.linalg.inv(vo.delta))
+        step_cov = vo.cov[np.ix_([3, 4, 2], [3, 4, 2])]  # x, y of the translation; the turn about z
+        self._vo_cov = propagate_planar(self._vo_cov, prev, planar_from_matrix(vo.delta), step_cov)
+        self._vo_stamp = vo.stamp_ns
+        self.vo_pub.publish(visual_odometry_msg(vo, self._vo_cov, dt, f"{self.cfg.robot}/visual_odom",
+                                                f"{self.cfg.robot}/base_link"))
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -1,7 +1,8 @@
 """``mrslam replay BAG --offline``: feed a recorded run straight into the central mapper, as fast as
 possible, and write the same run folder as the live run.
 
-The bag's ``/<robot>/odom`` and ``/<robot>/observations`` go, in the order they were recorded,
+The bag's ``/<robot>/odom`` (or ``/<robot>/visual_odom``, or both fused, as the central node's
+``odometry`` sources say) and ``/<robot>/observations`` go, in the order they were recorded,
 into :class:`mrslam_core.pipelines.central.CentralMapper` configured from the central node's
 parameters (``--config``, default ``slam.yaml`` beside the bag, as ``mrslam demo`` writes it), so
 the filter makes the same updates in the same order as the live node did; the report compares
@@ -51,9 +52,17 @@ def feed(bag: Path, mapper: CentralMapper, progress: bool = True,
     down = None if downtime is None else (int(downtime[0] * 1e9), int(downtime[1] * 1e9))
     skip_until = 0
 
+    from mrslam_core.pipelines.odometry import OdometryFusion
+    from mrslam_ros.conversions import odometry_twist_covariance
+
+    source = getattr(mapper.cfg, "source", lambda r: "wheel")  # the central node's odometry sources
+    fusion = {r: OdometryFusion(mapper.cfg.filter.motion) for r in mapper.robots if source(r) == "fused"}
     topics = {}
     for r in mapper.robots:
-        topics[f"/{r}/odom"] = (r, "odom")
+        if source(r) in ("wheel", "fused"):
+            topics[f"/{r}/odom"] = (r, "odom")
+        if source(r) in ("visual", "fused"):
+            topics[f"/{r}/visual_odom"] = (r, "visual_odom")
         topics[f"/{r}/observations"] = (r, "obs")
     info = bag_info(bag)
     total = sum(t.count for name, t in info.topics.items() if name in topics)
@@ -63,8 +72,9 @@ def feed(bag: Path, mapper: CentralMapper, progress: bool = True,
         robot, kind = topics[m.topic]
         msg = deserialize(m.data, m.msgtype)
         try:
-            if kind == "odom":
+            if kind in ("odom", "visual_odom"):
                 stamp, pose, _ = odometry_to_pose(msg)
+                twist_cov = odometry_twist_covariance(msg) if kind == "visual_odom" else None
             else:
                 obs = cloud_to_observations(msg, robot)
                 stamp = obs.stamp_ns
@@ -78,8 +88,15 @@ def feed(bag: Path, mapper: CentralMapper, progress: bool = True,
             skip_until, down = down[1], None
         if stamp < skip_until:
             continue
-        if kind == "odom":
-            mapper.add_odometry(robot, stamp, pose)
+        if kind in ("odom", "visual_odom"):
+            if robot in fusion:
+                f = fusion[robot]
+                poses = f.add_wheel(stamp, pose) if kind == "odom" else f.add_visual(stamp, pose, twist_cov)
+            else:
+                poses = [(stamp, pose)]
+            for t, p in poses:
+                mapper.add_odometry(robot, t, p)
+            kind = "odom"
         else:
             mapper.add_observations(obs)
             mapper.process()

@@ -1,7 +1,8 @@
 """The central SLAM node: every robot's observations and odometry into ONE multi-robot filter.
 
-Subscribes, per robot listed in the config: ``/<robot>/odom`` (nav_msgs/Odometry, odom -> base_link)
-and ``/<robot>/observations`` (PointCloud2 from the frontend, base_link). The ordering, pairing with
+Subscribes, per robot listed in the config: its odometry (``odometry``: ``/<robot>/odom``, wheel
+odometry, nav_msgs/Odometry odom -> base_link; ``/<robot>/visual_odom``, the frontend's visual
+odometry; or both, fused) and ``/<robot>/observations`` (PointCloud2 from the frontend, base_link). The ordering, pairing with
 odometry, the filter and the merging of robots with an unknown start pose (``unknown_start``) live
 in :class:`mrslam_core.pipelines.central.CentralMapper`; this node
 converts and publishes: ``/<robot>/pose`` (PoseWithCovarianceStamped, map), ``/<robot>/path``,
@@ -51,12 +52,14 @@ from mrslam_ros.conversions import (
     cloud_to_observations,
     landmark_markers,
     odometry_to_pose,
+    odometry_twist_covariance,
     path_msg,
     pose_array_msg,
     pose_with_covariance,
     transform_msg,
 )
 from mrslam_ros.diagnostics import Diagnostics
+from mrslam_core.pipelines.odometry import OdometryFusion
 from mrslam_ros.params import declare_config, read_config
 from mrslam_ros.spin import drop_untakeable, run_node
 
@@ -89,6 +92,11 @@ class SlamNodeConfig(CentralConfig):
             pose, and one live faulted run mapped robot1 6.3 deg turned from its first second on
             (docs/reliability.md). A topic still without a publisher then is subscribed as
             soon as its publishers are seen (every 0.2 s), as they offer [s].
+        odometry: each robot's odometry source, in ``robots`` order (one entry: every robot):
+            ``wheel`` (``/<robot>/odom``), ``visual`` (the frontend's ``/<robot>/visual_odom``,
+            for robots without wheel odometry) or ``fused`` (both, step by step weighted by their
+            covariances: :mod:`mrslam_core.pipelines.odometry`; the wheel steps' covariance is
+            the filter's motion model). The robot's odom frame is its source's.
     """
 
     map_frame: str = "map"
@@ -102,6 +110,18 @@ class SlamNodeConfig(CentralConfig):
     process_period: float = 0.01
     process_budget: float = 0.0
     discovery_wait: float = 3.0
+    odometry: tuple[str, ...] = ("wheel",)
+
+    def __post_init__(self) -> None:
+        from mrslam_core.pipelines.odometry import SOURCES
+
+        if len(self.odometry) not in (1, len(self.robots)) or any(o not in SOURCES for o in self.odometry):
+            raise ValueError(f"odometry must be one of {SOURCES} for every robot, or one for all "
+                             f"(got {list(self.odometry)} for {len(self.robots)} robots)")
+
+    def source(self, robot: str) -> str:
+        """The odometry source of ``robot``."""
+        return self.odometry[0] if len(self.odometry) == 1 else self.odometry[self.robots.index(robot)]
 
 
 def points_cloud(mean: np.ndarray, stamp_ns: int, frame_id: str) -> PointCloud2:
@@ -135,7 +155,14 @@ class SlamNode(Node):
         self.cloud_pub = self.create_publisher(PointCloud2, "/slam/landmarks", 1)
         self.marker_pub = self.create_publisher(MarkerArray, "/slam/landmark_markers", 1)
         self.particle_pub = self.create_publisher(PoseArray, "/slam/particles", 1)
-        topics = [f"/{r}/{kind}" for kind in ("odom", "observations") for r in robots]
+        self._fusion = {r: OdometryFusion(self.cfg.filter.motion) for r in robots if self.cfg.source(r) == "fused"}
+        odometry_specs = []
+        for r in robots:
+            if self.cfg.source(r) in ("wheel", "fused"):
+                odometry_specs.append((Odometry, f"/{r}/odom", partial(self.on_odom, r), 100))
+            if self.cfg.source(r) in ("visual", "fused"):
+                odometry_specs.append((Odometry, f"/{r}/visual_odom", partial(self.on_visual_odom, r), 100))
+        topics = [spec[1] for spec in odometry_specs] + [f"/{r}/observations" for r in robots]
         self._wait_for_publishers(topics, self.cfg.discovery_wait)  # learn who keeps a history first
         #: input subscriptions, odometry first: :meth:`drain` empties them in this order
         # transient-local where every publisher keeps a history: a node that starts late or
@@ -143,8 +170,7 @@ class SlamNode(Node):
         # any publisher matches. A topic with no publisher yet, or a robot's kept sets before its
         # odometry is heard, is subscribed later by :meth:`adapt_inputs` (None until then).
         self._inputs_group = inputs
-        self._input_specs = [(Odometry, f"/{r}/odom", partial(self.on_odom, r), 100) for r in robots]
-        self._input_specs += [(PointCloud2, f"/{r}/observations", partial(self.on_observations, r),
+        self._input_specs = odometry_specs + [(PointCloud2, f"/{r}/observations", partial(self.on_observations, r),
                                self.cfg.input_depth) for r in robots]
         #: robots whose odometry has been heard (their kept observation sets are subscribed only then)
         self.odometry_heard: set[str] = set()
@@ -185,14 +211,38 @@ class SlamNode(Node):
 
     # ------------------------------------------------------------------ callbacks
     def on_odom(self, robot: str, msg: Odometry) -> None:
+        """Wheel odometry: the robot's odometry, or the wheel half of its fused odometry."""
         try:
             stamp, pose, _ = odometry_to_pose(msg)
         except ConversionError as exc:
             self.diag.count("bad_odometry", f"{robot}: {exc}")
             return
+        if robot in self._fusion:
+            self._add_odometry(robot, self._fusion[robot].add_wheel(stamp, pose))
+        else:
+            self._add_odometry(robot, [(stamp, pose)])
+
+    def on_visual_odom(self, robot: str, msg: Odometry) -> None:
+        """The frontend's visual odometry: the robot's odometry, or the visual half of its fused one."""
+        try:
+            stamp, pose, _ = odometry_to_pose(msg)
+            twist_cov = odometry_twist_covariance(msg)
+        except ConversionError as exc:
+            self.diag.count("bad_odometry", f"{robot}: {exc}")
+            return
+        if robot in self._fusion:
+            self._add_odometry(robot, self._fusion[robot].add_visual(stamp, pose, twist_cov))
+            self.diag.mirror({"odometry_not_fused": self._fusion[robot].dropped}, detail=robot)
+        else:
+            self._add_odometry(robot, [(stamp, pose)])
+
+    def _add_odometry(self, robot: str, poses: list[tuple[int, np.ndarray]]) -> None:
+        if not poses:
+            return
         self.odometry_heard.add(robot)
         with self.lock:
-            self.mapper.add_odometry(robot, stamp, pose)
+            for stamp, pose in poses:
+                self.mapper.add_odometry(robot, stamp, pose)
             self.diag.mirror(self.mapper.drops, detail=robot)
 
     def on_observations(self, robot: str, msg: PointCloud2) -> None:
@@ -276,8 +326,9 @@ class SlamNode(Node):
             return None
         qos = adapted_to_publishers(infos, topic, depth)
         robots = self.mapper.robots
-        if (i >= len(robots) and qos.durability == DurabilityPolicy.TRANSIENT_LOCAL
-                and robots[i - len(robots)] not in self.odometry_heard):
+        first_set = len(self._input_specs) - len(robots)  # the observation sets follow the odometry
+        if (i >= first_set and qos.durability == DurabilityPolicy.TRANSIENT_LOCAL
+                and robots[i - first_set] not in self.odometry_heard):
             return None
         return self.create_subscription(msg_type, topic, callback, qos, callback_group=self._inputs_group)
 

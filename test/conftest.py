@@ -24,3 +24,21 @@ def mrclam6(shared_data: Path) -> Path:
     if not folder.is_dir():
         pytest.skip(f"MR.CLAM dataset 6 not found at {folder}")
     return folder
+
+
+@pytest.fixture(scope="session")
+def kitti_dir(shared_data: Path) -> Path:
+    """The KITTI odometry excerpt (51 rectified stereo pairs, calib.txt, poses.txt)."""
+    folder = shared_data / "kitti_excerpt"
+    if not (folder / "calib.txt").is_file():
+        pytest.skip(f"KITTI excerpt not found at {folder}")
+    return folder
+
+
+@pytest.fixture(scope="session")
+def euroc_micro(shared_data: Path) -> Path:
+    """The 30 still EuRoC V1_01 stereo pairs with both cameras' sensor.yaml."""
+    folder = shared_data / "euroc_v101_micro"
+    if not (folder / "cam0" / "sensor.yaml").is_file():
+        pytest.skip(f"EuRoC micro sample not found at {folder}")
+    return folder

@@ -9,6 +9,10 @@ def explored_fraction(known: np.ndarray, origin: np.ndarray, resolution: float,
                       truth_free: np.ndarray, truth_resolution: float) -> float:
     """Share of the world's reachable free cells that the grid has observed.
 
+    The grid and the world's raster need not match in extent or resolution (a growing grid
+    covers what was seen, not the world): each world cell is looked up at its centre, and world
+    cells off the grid count as not observed.
+
     Args:
         known: (H, W) bool, grid cells observed (row = y, column = x).
         origin: (2,) or (3,) map-frame position [m] of the grid's cell (0, 0) corner (yaw ignored).

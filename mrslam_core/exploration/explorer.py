@@ -138,7 +138,9 @@ class Explorer:
     """Coordinated frontier exploration for robots ``robots`` (002 section V).
 
     Call :meth:`step` with the current grid, every robot's pose (map frame) and the time; it
-    (re)assigns targets when due and returns each robot's (v, ω) command.
+    (re)assigns targets when due and returns each robot's (v, ω) command. The grid may grow
+    between calls (its cell (0, 0) moves): everything kept from one call to the next (targets,
+    paths, blacklist, bumper hits, checkpoints) is in metres, map frame, never grid cells.
     """
 
     config: ExplorationConfig

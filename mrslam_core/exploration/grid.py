@@ -1,7 +1,8 @@
-"""Log-odds occupancy grid built from 2D scans (pseudo laser from stereo, or a laser).
+"""Log-odds occupancy grid built from 2D scans (pseudo laser from stereo, or a laser), growing
+with what the scans reach.
 
 Cells are indexed (row, col) = (iy, ix): cell (i, j) covers x ∈ [ox + j·res, ox + (j+1)·res),
-y ∈ [oy + i·res, oy + (i+1)·res) in the map frame.
+y ∈ [oy + i·res, oy + (i+1)·res) in the map frame, (ox, oy) the grid's current origin.
 """
 
 from __future__ import annotations
@@ -10,7 +11,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from mrslam_core.arrays import unique_rows
 from mrslam_core.exploration.config import GridConfig
 
 
@@ -49,27 +49,108 @@ class Scan:
 
 
 class OccupancyGrid:
-    """Log-odds grid (H, W) float32; probability = 1 / (1 + exp(−log-odds)); 0.5 = unknown."""
+    """Log-odds occupancy grid that grows with what the robots see.
 
-    def __init__(self, cfg: GridConfig | None = None):
+    The map frame's floor is cut into square cells of side ``res`` on one fixed lattice: world
+    cell (I, J) = (⌊y / res⌋, ⌊x / res⌋) covers x ∈ [J·res, (J+1)·res), y ∈ [I·res, (I+1)·res).
+    The grid holds a dense window of that lattice, the arrays
+
+    - ``logodds`` (H, W) float32: probability = 1 / (1 + exp(−log-odds)); 0 (p = 0.5) = unknown;
+    - ``observed`` (H, W) bool: cells a beam reached at least once,
+
+    whose cell (i, j) (row = y, column = x) is world cell (i + ``offset[0]``, j + ``offset[1]``):
+    it covers x ∈ [ox + j·res, ox + (j+1)·res), y ∈ [oy + i·res, oy + (i+1)·res) with
+    (ox, oy) = :attr:`origin`.
+
+    Growth. :meth:`insert` first makes room for every cell the scan marks: the hit cells, and
+    the cells a beam passed with their 8 neighbours (so a free cell at the edge of what was seen
+    still borders an unknown cell on the grid: a frontier; beyond the arrays nothing is looked
+    at). A side that must move goes out to the next multiple of ``block`` cells of the lattice
+    (``GridConfig.block``), the other sides stay; the arrays are re-allocated and the old ones
+    copied into place. A world point keeps its world cell and its values; only its array index
+    changes with ``offset``, so anything kept across calls must be kept in metres (the explorer
+    keeps targets and paths in metres), or converted with :meth:`cell_of` on the grid as it is
+    now. The grid never shrinks.
+
+    Memory. Started empty, the arrays are the bounding box of the observed cells (grown by one
+    cell where a beam passed) rounded out to the block lattice: per axis at most (extent of the
+    observed cells + 2 blocks) cells, 5 bytes per cell (the 40 × 30 m hall40x30 world scanned
+    all over at 0.1 m: 320 × 410 cells, 0.66 MB). A dense bounding box rather than a hash of
+    tiles that exist only where something was seen: every consumer (frontiers, inflation by
+    distance transform, travel cost by Dijkstra, A*) needs a dense (H, W) array of the explored
+    area, which a tiled store would assemble at each call; and for a building the bounding box
+    of what was seen is about its footprint.
+    """
+
+    def __init__(self, cfg: GridConfig | None = None,
+                 extent: tuple[tuple[float, float], tuple[float, float]] | None = None):
+        """An empty grid, or one allocated on ``extent`` = ((x_min, y_min), (x_max, y_max)) [m]
+        rounded out to the cell lattice (not to blocks; for grids prepared by hand, and callers
+        that know the area ahead)."""
         self.cfg = cfg or GridConfig()
         self.res = self.cfg.resolution
-        self.origin = np.asarray(self.cfg.origin, float)
-        self.shape = (int(np.ceil(self.cfg.size[1] / self.res)), int(np.ceil(self.cfg.size[0] / self.res)))
-        self.logodds = np.zeros(self.shape, np.float32)
-        self.observed = np.zeros(self.shape, bool)
+        self.block_cells = int(round(self.cfg.block / self.res))
+        shape = (0, 0)
+        #: (row, col) world cell of the arrays' cell (0, 0)
+        self.offset = np.zeros(2, np.int64)
+        if extent is not None:
+            (x0, y0), (x1, y1) = extent
+            lo = np.floor(np.array([y0, x0]) / self.res + 1e-9).astype(np.int64)
+            hi = np.ceil(np.array([y1, x1]) / self.res - 1e-9).astype(np.int64)
+            shape = tuple(int(n) for n in np.maximum(hi - lo, 0))
+            self.offset = lo
+        self.logodds = np.zeros(shape, np.float32)
+        self.observed = np.zeros(shape, bool)
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """(H, W) of the arrays now (they grow)."""
+        return self.logodds.shape
+
+    @property
+    def origin(self) -> np.ndarray:
+        """(x, y) [m] map frame of the arrays' cell (0, 0) lower-left corner now (a new array)."""
+        return self.offset[::-1] * self.res
+
+    def _world_cells(self, xy: np.ndarray) -> np.ndarray:
+        """Map points (..., 2) (x, y) [m] -> world cells (..., 2) (row, col) int64."""
+        return np.floor(np.asarray(xy, float)[..., ::-1] / self.res).astype(np.int64)
 
     def cell_of(self, xy: np.ndarray) -> np.ndarray:
-        """Map points (..., 2) [m] -> integer cells (..., 2) as (row, col)."""
-        ij = np.floor((np.asarray(xy)[..., ::-1] - self.origin[::-1]) / self.res).astype(np.int64)
-        return ij
+        """Map points (..., 2) [m] -> integer cells (..., 2) as (row, col) of the arrays now;
+        points off the grid give indices outside [0, shape) (see :meth:`inside`)."""
+        return self._world_cells(xy) - self.offset
 
     def centre_of(self, cells: np.ndarray) -> np.ndarray:
-        """Cells (..., 2) (row, col) -> their centres (..., 2) (x, y) [m]."""
-        return (np.asarray(cells)[..., ::-1] + 0.5) * self.res + self.origin
+        """Cells (..., 2) (row, col) of the arrays now -> their centres (..., 2) (x, y) [m]."""
+        return (np.asarray(cells)[..., ::-1] + self.offset[::-1] + 0.5) * self.res
 
     def inside(self, cells: np.ndarray) -> np.ndarray:
         return (cells[..., 0] >= 0) & (cells[..., 0] < self.shape[0]) & (cells[..., 1] >= 0) & (cells[..., 1] < self.shape[1])
+
+    def cover(self, lower: np.ndarray, upper: np.ndarray) -> None:
+        """Grow (by whole blocks) until the grid holds the points ``lower`` and ``upper`` (x, y)
+        [m] and the rectangle between them; new cells are unknown."""
+        self._cover_cells(self._world_cells(lower), self._world_cells(upper))
+
+    def _cover_cells(self, lo: np.ndarray, hi: np.ndarray) -> None:
+        """Grow until the arrays hold world cells ``lo`` … ``hi`` (row, col), both included."""
+        b = self.block_cells
+        start = self.offset
+        stop = self.offset + np.array(self.shape)
+        if self.logodds.size == 0:
+            new_start, new_stop = lo // b * b, -(-(hi + 1) // b) * b
+        else:
+            new_start = np.where(lo < start, lo // b * b, start)
+            new_stop = np.where(hi >= stop, -(-(hi + 1) // b) * b, stop)
+        if np.array_equal(new_start, start) and np.array_equal(new_stop, stop):
+            return
+        shape = tuple(int(n) for n in new_stop - new_start)
+        (r0, c0), (h, w) = start - new_start, self.shape
+        logodds, observed = np.zeros(shape, np.float32), np.zeros(shape, bool)
+        logodds[r0:r0 + h, c0:c0 + w] = self.logodds
+        observed[r0:r0 + h, c0:c0 + w] = self.observed
+        self.logodds, self.observed, self.offset = logodds, observed, new_start
 
     def probability(self) -> np.ndarray:
         """(H, W) occupancy probability; unobserved cells are exactly 0.5."""
@@ -84,37 +165,43 @@ class OccupancyGrid:
     def insert(self, pose: np.ndarray, scan: Scan, teammates: np.ndarray | None = None) -> None:
         """Trace each beam from the robot at ``pose`` (x, y, θ) map frame: cells passed get
         ``miss``, the end cell of a hit ``hit``; hits on ``teammates`` (K, 2) [m], the other
-        robots' positions, mark no obstacle (``teammate_radius``).
+        robots' positions, mark no obstacle (``teammate_radius``). The grid grows first to hold
+        every cell marked (see the class).
 
-        Vectorised over beams: points are sampled along every beam at half a cell apart.
+        Vectorised over beams: points are sampled along every beam at half a cell apart. A pose
+        or beams that are not finite mark nothing (they would stretch the grid without bound).
         """
         pose = np.asarray(pose, float)
+        if not np.isfinite(pose).all():
+            return
+        ok = np.isfinite(scan.bearings) & np.isfinite(scan.ranges)
+        if not ok.all():
+            scan = Scan(scan.bearings[ok], scan.ranges[ok], scan.hit[ok])
         if teammates is not None:
             scan = scan.without_hits_near(pose, teammates, self.cfg.teammate_radius)
         ang = pose[2] + scan.bearings
+        direction = np.column_stack([np.cos(ang), np.sin(ang)])  # (N, 2)
         steps = np.arange(0.0, float(scan.ranges.max(initial=0.0)), self.res / 2)
-        if steps.size == 0:
+        beam, step = np.nonzero(steps[None, :] < scan.ranges[:, None] - self.res / 2)
+        free = self._world_cells(pose[:2] + steps[step, None] * direction[beam])
+        hits = self._world_cells(pose[:2] + scan.ranges[scan.hit, None] * direction[scan.hit])
+        if not len(free) and not len(hits):
             return
-        rr = np.minimum(steps[None, :], scan.ranges[:, None])
-        pts = pose[None, None, :2] + rr[..., None] * np.stack([np.cos(ang), np.sin(ang)], -1)[:, None, :]
-        cells = self.cell_of(pts)
-        end = self.cell_of(pose[:2] + scan.ranges[:, None] * np.column_stack([np.cos(ang), np.sin(ang)]))
-        free_mask = self.inside(cells) & (steps[None, :] < scan.ranges[:, None] - self.res / 2)
-        free_cells = unique_rows(cells[free_mask])
-        hit_cells = unique_rows(end[scan.hit & self.inside(end)])
-        if free_cells.size:
-            keep = np.ones(len(free_cells), bool)
-            if hit_cells.size:  # a cell holding an obstacle end is not cleared by other beams
-                keyf = free_cells[:, 0] * self.shape[1] + free_cells[:, 1]
-                keyh = hit_cells[:, 0] * self.shape[1] + hit_cells[:, 1]
-                keep = ~np.isin(keyf, keyh)
-            fc = free_cells[keep]
-            self.logodds[fc[:, 0], fc[:, 1]] += self.cfg.miss
-            self.observed[free_cells[:, 0], free_cells[:, 1]] = True
-        if hit_cells.size:
-            self.logodds[hit_cells[:, 0], hit_cells[:, 1]] += self.cfg.hit
-            self.observed[hit_cells[:, 0], hit_cells[:, 1]] = True
-        np.clip(self.logodds, -self.cfg.clamp, self.cfg.clamp, out=self.logodds)
+        # the cells a beam passed with their 8 neighbours (a frontier needs its unknown neighbour
+        # on the grid), the hit cells themselves (occupied: never a frontier)
+        reach = np.concatenate([free - 1, free + 1, hits])
+        self._cover_cells(reach.min(axis=0), reach.max(axis=0))
+        width = self.shape[1]
+        free_keys = np.unique((free[:, 0] - self.offset[0]) * width + free[:, 1] - self.offset[1])
+        hit_keys = np.unique((hits[:, 0] - self.offset[0]) * width + hits[:, 1] - self.offset[1])
+        # a cell holding an obstacle end is not cleared by other beams
+        cleared = np.setdiff1d(free_keys, hit_keys, assume_unique=True)
+        c = self.cfg
+        for keys, add in ((cleared, c.miss), (hit_keys, c.hit)):
+            rc = np.divmod(keys, width)
+            self.logodds[rc] = np.clip(self.logodds[rc] + add, -c.clamp, c.clamp)
+        self.observed[np.divmod(free_keys, width)] = True
+        self.observed[np.divmod(hit_keys, width)] = True
 
 
 @dataclass

@@ -39,8 +39,7 @@ class TeamSim2D:
         starts[:, 2] = wrap_angle(starts[:, 2] + rng.uniform(-0.3, 0.3, robots))
         self.names = [f"robot{i + 1}" for i in range(robots)]
         self.poses = {n: starts[i].copy() for i, n in enumerate(self.names)}
-        gcfg = grid or GridConfig(size=(world.size[0] + 2, world.size[1] + 2))
-        self.grid = OccupancyGrid(gcfg)
+        self.grid = OccupancyGrid(grid or GridConfig())
         self.explorer = Explorer(explore, self.names)
         body = ndimage.distance_transform_edt(~self.truth) * res <= 0.2
         lab, _ = ndimage.label(~body)

@@ -6,6 +6,14 @@ from dataclasses import dataclass
 from typing import Literal
 
 
+#: E0 of frame-to-frame tracking per descriptor, squared distance of unit vectors. U-SURF and
+#: SIFT 0.5 (000's E0 for U-SURF); ORB 0.78: a Hamming distance of 50 of 256 bits (4·50/256),
+#: ORB-SLAM's threshold of a good match (TH_LOW; Mur-Artal et al. 2015). With 0.5 (32 bits),
+#: half of the ORB corners the KITTI excerpt's next frame found again at the right pixel were
+#: not continued (docs/results.md).
+TRACK_DESCRIPTOR_GATE = {"usurf": 0.5, "sift": 0.5, "orb": 0.78}
+
+
 @dataclass(frozen=True)
 class FrontendConfig:
     """Stereo frontend of 000 (sections 3.2, 4, 6.1): detect, describe, match, triangulate, track.
@@ -19,6 +27,10 @@ class FrontendConfig:
         descriptor: ``usurf`` (upright SURF, 64-d, the paper's choice), ``orb`` (256 bits) or
             ``sift`` (128-d).
         max_features: detections kept per left image, strongest first.
+        orb_levels: pyramid levels of the ORB detector. 1: a frame-to-frame frontend needs the
+            corners' positions to the pixel (a corner of pyramid level k is located to 1.2^k px),
+            not their scale, which barely changes between frames (KITTI excerpt, ORB points
+            published a frame: 8 levels 15.6, 1 level 19.9; docs/results.md).
         harris_block_size: Harris window [px].
         harris_k: Harris k.
         harris_quality: corners weaker than this fraction of the strongest are dropped.
@@ -49,19 +61,26 @@ class FrontendConfig:
         max_observations: B, at most this many observations per frame.
         grid_cols: image grid columns for spreading the B observations.
         grid_rows: image grid rows.
-        track_descriptor_gate: E0 for frame-to-frame tracking (squared distance of unit vectors).
+        track_descriptor_gate: E0 for frame-to-frame tracking (squared distance of unit vectors);
+            None: the descriptor's own (:data:`TRACK_DESCRIPTOR_GATE`).
         track_ratio: best/second-best descriptor distance ratio for tracking.
         track_radius_px: largest image motion of a point between consecutive frames, around the
             frame's common motion [px].
         track_search_px: radius in which the frame's common image motion (a turning robot) is
             looked for [px]; at most ``track_radius_px`` turns that search off.
-        track_consistency_gate: a continued track must agree with the frame's rigid motion:
-            the 3D motion between consecutive frames is fitted to the tracked points by RANSAC
-            (Kabsch on 3-point samples), and a track whose point in this frame, moved back,
-            lies further than this chi-square quantile (3 dof, with both points' covariances)
-            from its point in the previous frame ends there (a wrong stereo match in one frame,
-            or a look-alike continuing the track). 0 turns the check off.
-        track_ransac_hypotheses: 3-point samples drawn for that fit.
+        track_window_gate: χ² (2 dof) gate of a track's search window around its pixel predicted
+            from the camera's motion (9.21: 99 %).
+        keypoint_sigma_px: a keypoint's detection noise in the search window's covariance [px].
+        prior_sigma_rot: standard deviation of the constant-velocity motion prior per frame, per
+            axis [rad] (the camera's rotation this frame differs from the last one's by that).
+        prior_sigma_trans: the same for the translation, per axis [m].
+        vo_gate: χ² (3 dof) gate of a continued track's 3D residual under the visual odometry's
+            motion and both points' covariances; tracks outside it end (14.16: 3σ, 99.73 %).
+        vo_ransac_px: PnP RANSAC inlier threshold on the reprojection error [px].
+        vo_ransac_iterations: PnP RANSAC iterations.
+        vo_min_inliers: fewer tracks in the gate: the frame's motion is unknown (counted in
+            ``vo_failures``; the constant-velocity prior stands in, with its covariance).
+        subpixel: refine Harris corners to sub-pixel positions (cv2.cornerSubPix).
         min_depth: points nearer than this along the optical axis are dropped [m].
         max_depth: points farther than this are dropped [m].
         obstacle_min_height: lower edge of the obstacle band in base_link z [m].
@@ -78,6 +97,7 @@ class FrontendConfig:
     detector: Literal["harris", "orb", "sift"] = "harris"
     descriptor: Literal["usurf", "orb", "sift"] = "usurf"
     max_features: int = 400
+    orb_levels: int = 1
     harris_block_size: int = 3
     harris_k: float = 0.04
     harris_quality: float = 0.01
@@ -99,12 +119,19 @@ class FrontendConfig:
     max_observations: int = 20
     grid_cols: int = 5
     grid_rows: int = 4
-    track_descriptor_gate: float = 0.5
+    track_descriptor_gate: float | None = None
     track_ratio: float = 0.9
     track_radius_px: float = 60.0
     track_search_px: float = 160.0
-    track_consistency_gate: float = 0.0
-    track_ransac_hypotheses: int = 64
+    track_window_gate: float = 9.21
+    keypoint_sigma_px: float = 1.0
+    prior_sigma_rot: float = 0.02
+    prior_sigma_trans: float = 0.05
+    vo_gate: float = 14.16
+    vo_ransac_px: float = 2.0
+    vo_ransac_iterations: int = 100
+    vo_min_inliers: int = 8
+    subpixel: bool = True
     min_depth: float = 0.2
     max_depth: float = 20.0
     obstacle_min_height: float = 0.05
@@ -116,12 +143,20 @@ class FrontendConfig:
     max_stamp_skew_ns: int = 5_000_000
     saturated_fraction: float = 0.9
 
+    @property
+    def tracking_gate(self) -> float:
+        """E0 of frame-to-frame tracking: ``track_descriptor_gate``, or the descriptor's own."""
+        if self.track_descriptor_gate is not None:
+            return self.track_descriptor_gate
+        return TRACK_DESCRIPTOR_GATE[self.descriptor]
+
     def __post_init__(self) -> None:
         positive = (
-            "max_features", "harris_block_size", "usurf_scale", "patch_radius", "sigma_d",
+            "max_features", "orb_levels", "harris_block_size", "usurf_scale", "patch_radius", "sigma_d",
             "sigma_r", "sigma_c", "min_track_length", "max_observations", "grid_cols",
             "grid_rows", "track_radius_px", "max_depth", "scan_bins", "scan_max_range",
-            "dense_downsample", "track_ransac_hypotheses",
+            "dense_downsample", "track_window_gate", "keypoint_sigma_px", "prior_sigma_rot",
+            "prior_sigma_trans", "vo_gate", "vo_ransac_px", "vo_ransac_iterations", "vo_min_inliers",
         )
         for name in positive:
             if getattr(self, name) <= 0:
@@ -134,10 +169,8 @@ class FrontendConfig:
             raise ValueError("max_match_cost must be in (0, 2] (it is 1 - ZNCC)")
         if not 0.0 < self.track_ratio <= 1.0:
             raise ValueError("track_ratio must be in (0, 1]")
-        if not 0.0 <= self.track_descriptor_gate <= 4.0:
+        if self.track_descriptor_gate is not None and not 0.0 <= self.track_descriptor_gate <= 4.0:
             raise ValueError("track_descriptor_gate must be in [0, 4] (unit descriptors)")
-        if self.track_consistency_gate < 0:
-            raise ValueError("track_consistency_gate must be >= 0 (0: off)")
         if not 0.0 <= self.harris_cell_floor <= self.harris_quality:
             raise ValueError("harris_cell_floor must be in [0, harris_quality] (0: off)")
         if not 0.0 <= self.min_depth < self.max_depth:

@@ -13,10 +13,13 @@ import cv2
 import numpy as np
 
 from mrslam_core.frontend.config import FrontendConfig
+from mrslam_core.frontend.spread import select_spread
 from mrslam_core.frontend.usurf import usurf
 
 DESCRIPTOR_DIM = {"usurf": 64, "orb": 256, "sift": 128}
-_SIFT_SIZE_PER_SCALE = 10.0  # SIFT keypoint diameter given to scale-less (Harris) keypoints, per s
+_SUBPIX_CRITERIA = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 10, 0.01)
+_SIFT_SIZE_PER_SCALE = 10.0
+_CANDIDATES = 2  # OpenCV detections per kept keypoint, for the spread to choose from  # SIFT keypoint diameter given to scale-less (Harris) keypoints, per s
 
 
 @dataclass(frozen=True)
@@ -27,23 +30,29 @@ class Keypoints:
         xy: (N, 2) float (column, row) [px], pixel centres at integers.
         response: (N,) detector strength (larger is stronger; units depend on the detector).
         size: (N,) keypoint diameter [px] (0 for Harris).
+        octave: (N,) OpenCV's packed octave of the detection (the pyramid level its descriptor is
+            computed at), or None: 0 for all (Harris).
     """
 
     xy: np.ndarray
     response: np.ndarray
     size: np.ndarray
+    octave: np.ndarray | None = None
 
     def __len__(self) -> int:
         return self.xy.shape[0]
 
     def take(self, index: np.ndarray) -> Keypoints:
         """Subset by index or boolean mask."""
-        return Keypoints(self.xy[index], self.response[index], self.size[index])
+        octave = None if self.octave is None else self.octave[index]
+        return Keypoints(self.xy[index], self.response[index], self.size[index], octave)
 
 
 def harris(image: np.ndarray, cfg: FrontendConfig, margin: int) -> Keypoints:
     """Harris corners: response map, non-maximum suppression, relative threshold (the image's
-    strongest, or each grid cell's: ``harris_cell_floor``), strongest first.
+    strongest, or each grid cell's: ``harris_cell_floor``), at most ``max_features`` spread over
+    the ``grid_cols`` x ``grid_rows`` grid (each cell's strongest first, round-robin), strongest
+    first.
 
     Args:
         image: (H, W) uint8.
@@ -66,10 +75,17 @@ def harris(image: np.ndarray, cfg: FrontendConfig, margin: int) -> Keypoints:
     rows, cols = np.nonzero(peak)
     strength = resp[rows, cols]
     if strength.size > cfg.max_features:
-        keep = np.argpartition(-strength, cfg.max_features - 1)[: cfg.max_features]
+        keep = select_spread(np.stack([cols, rows], axis=1), strength, np.ones(strength.size, bool),
+                             cfg.max_features, image.shape[1], image.shape[0], cfg.grid_cols, cfg.grid_rows)
         rows, cols, strength = rows[keep], cols[keep], strength[keep]
     order = np.argsort(-strength, kind="stable")
     xy = np.stack([cols[order], rows[order]], axis=1).astype(float)
+    if cfg.subpixel and xy.shape[0]:
+        # the corner where the image gradients of its window are orthogonal to the offsets
+        # (cv2.cornerSubPix); a refinement leaving the pixel is a poor corner and is not used
+        fine = cv2.cornerSubPix(image, xy.astype(np.float32).reshape(-1, 1, 2).copy(),
+                                (cfg.harris_block_size + 1,) * 2, (-1, -1), _SUBPIX_CRITERIA).reshape(-1, 2)
+        xy = np.where(np.abs(fine - xy).max(axis=1, keepdims=True) <= 0.5, fine, xy)
     return Keypoints(xy, strength[order].astype(float), np.zeros(order.size))
 
 
@@ -89,11 +105,17 @@ def _from_cv(kps: list, image_shape: tuple[int, int], margin: int) -> Keypoints:
     xy = np.array([k.pt for k in kps], dtype=float)
     resp = np.array([k.response for k in kps], dtype=float)
     size = np.array([k.size for k in kps], dtype=float)
+    octave = np.array([k.octave for k in kps], dtype=np.int64)
     h, w = image_shape
     c = np.rint(xy)
     ok = (c[:, 0] >= margin) & (c[:, 0] < w - margin) & (c[:, 1] >= margin) & (c[:, 1] < h - margin)
-    order = np.argsort(-resp[ok], kind="stable")
-    return Keypoints(xy[ok][order], resp[ok][order], size[ok][order])
+    order = np.flatnonzero(ok)[np.argsort(-resp[ok], kind="stable")]
+    # one keypoint per pixel, the strongest: SIFT gives one per orientation of a blob, and the
+    # descriptors here are upright, so they would be copies of each other that no ratio test
+    # can tell apart
+    _, first = np.unique(c[order], axis=0, return_index=True)
+    order = order[np.sort(first)]
+    return Keypoints(xy[order], resp[order], size[order], octave[order])
 
 
 class FeatureExtractor:
@@ -106,16 +128,22 @@ class FeatureExtractor:
     def __init__(self, cfg: FrontendConfig):
         self.cfg = cfg
         self.dim = DESCRIPTOR_DIM[cfg.descriptor]
-        self._orb = cv2.ORB_create(nfeatures=cfg.max_features, edgeThreshold=15, patchSize=31)
-        self._sift = cv2.SIFT_create(nfeatures=cfg.max_features)
+        # the OpenCV detectors find more than max_features, and the spread picks among them
+        self._orb = cv2.ORB_create(nfeatures=_CANDIDATES * cfg.max_features, nlevels=cfg.orb_levels,
+                                   edgeThreshold=15, patchSize=31)
+        self._sift = cv2.SIFT_create(nfeatures=_CANDIDATES * cfg.max_features)
 
     def detect(self, image: np.ndarray, margin: int) -> Keypoints:
-        """Keypoints of a grey (H, W) uint8 image, strongest first, at most max_features."""
+        """Keypoints of a grey (H, W) uint8 image, strongest first, at most max_features spread
+        over the image grid."""
         if self.cfg.detector == "harris":
             return harris(image, self.cfg, margin)
         det = self._orb if self.cfg.detector == "orb" else self._sift
         kps = _from_cv(list(det.detect(image, None)), image.shape, margin)
-        return kps.take(slice(0, self.cfg.max_features))
+        c = self.cfg
+        pick = select_spread(kps.xy, kps.response, np.ones(len(kps), bool), c.max_features,
+                             image.shape[1], image.shape[0], c.grid_cols, c.grid_rows)
+        return kps.take(np.sort(pick))  # _from_cv ordered them strongest first
 
     def describe(self, image: np.ndarray, kps: Keypoints) -> tuple[np.ndarray, np.ndarray]:
         """Unit float32 descriptors (N, D) and a (N,) mask of keypoints that got one.
@@ -131,15 +159,17 @@ class FeatureExtractor:
         if self.cfg.descriptor == "usurf":
             out = usurf(image, kps.xy, self.cfg.usurf_scale)
             return out, np.ones(n, bool)
+        octave = np.zeros(n, np.int64)
         if self.cfg.descriptor == self.cfg.detector:
-            size = kps.size  # the detector's own scale
+            size = kps.size  # the detector's own scale and pyramid level
+            octave = kps.octave if kps.octave is not None else octave
         elif self.cfg.descriptor == "orb":
             size = np.full(n, 31.0)
         else:  # SIFT windows of a fixed scale for keypoints of another detector
             size = np.full(n, _SIFT_SIZE_PER_SCALE * self.cfg.usurf_scale)
         cv_kps = [
-            cv2.KeyPoint(float(x), float(y), float(s), 0.0, 0.0, 0, int(i))
-            for i, ((x, y), s) in enumerate(zip(kps.xy, size))
+            cv2.KeyPoint(float(x), float(y), float(s), 0.0, 0.0, int(o), int(i))
+            for i, ((x, y), s, o) in enumerate(zip(kps.xy, size, octave))
         ]
         ext = self._orb if self.cfg.descriptor == "orb" else self._sift
         got, desc = ext.compute(image, cv_kps)

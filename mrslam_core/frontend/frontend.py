@@ -18,8 +18,10 @@ from mrslam_core.frontend.camera import StereoRig
 from mrslam_core.frontend.config import FrontendConfig
 from mrslam_core.frontend.features import FeatureExtractor, Keypoints
 from mrslam_core.frontend.matching import match_stereo
+from mrslam_core.frontend.odometry import CameraMotion, estimate_motion, predict_pixels, skew
 from mrslam_core.frontend.obstacles import ObstacleScan, ObstacleScanner
-from mrslam_core.frontend.tracking import Tracker, select_spread
+from mrslam_core.frontend.spread import select_spread
+from mrslam_core.frontend.tracking import Tracker
 from mrslam_core.geometry.stereo import optical_to_body, triangulate, triangulation_covariance
 from mrslam_core.types import ObservationSet
 
@@ -50,6 +52,8 @@ class StereoFrame:
         track_length: (M,) consecutive frames seen, this one included.
         detected: keypoints the detector found in the left image (before stereo matching).
         matched: of those, the ones stereo matching accepted (before the depth limits).
+        motion: the camera's motion since the previous frame from the visual odometry, None
+            where it could not be estimated (or on a first frame).
     """
 
     xy: np.ndarray
@@ -62,6 +66,29 @@ class StereoFrame:
     track_length: np.ndarray
     detected: int = 0
     matched: int = 0
+    motion: CameraMotion | None = None
+
+
+@dataclass(frozen=True)
+class VisualOdometry:
+    """The frontend's visual odometry after a frame, in base_link terms.
+
+    Attributes:
+        stamp_ns: the frame's stamp [ns].
+        pose: (4, 4) T_odom_base, the base_link pose in the visual odometry's odom frame (base_link
+            at the first frame) [m].
+        delta: (4, 4) T_prev_cur, the base_link motion since the previous frame [m].
+        cov: (6, 6) covariance of the motion, over (δθ, δt) of base_link (rotation vector in the
+            current base frame [rad], translation in the previous base frame [m]).
+        estimated: False when the frame's motion could not be estimated and the constant-velocity
+            prediction (with its covariance) stands in.
+    """
+
+    stamp_ns: int
+    pose: np.ndarray
+    delta: np.ndarray
+    cov: np.ndarray
+    estimated: bool
 
 
 def image_to_grey(image: object, encoding: str | None) -> tuple[np.ndarray | None, str]:
@@ -108,6 +135,8 @@ class Frontend:
         frames: pairs processed (not dropped).
         last_frame: the :class:`StereoFrame` of the last processed pair (for tools and tests).
         last_error: text of the last ``internal_error``.
+        odometry: the visual odometry after the last processed pair (None before the first).
+        vo_failures: processed pairs (after the first) whose motion could not be estimated.
     """
 
     def __init__(self, rig: StereoRig, cfg: FrontendConfig | None = None, robot: str = "robot1"):
@@ -123,11 +152,25 @@ class Frontend:
         self.last_error: str | None = None
         self._last_stamp: int | None = None
         self._margin = 2 * self.cfg.patch_radius + 1
+        self.odometry: VisualOdometry | None = None
+        self.vo_failures = 0
+        self._velocity: CameraMotion | None = None  # last motion, the constant-velocity prior
 
     def reset(self) -> None:
-        """Forget tracks (e.g. after a gap in the stream)."""
+        """Forget tracks and the motion prior (e.g. after a gap in the stream); the visual
+        odometry's pose is kept and continues from where it was."""
         self.tracker.reset()
         self._last_stamp = None
+        self._velocity = None
+
+    def _prior(self) -> CameraMotion | None:
+        """The constant-velocity prediction of this frame's camera motion, with its covariance."""
+        if self._velocity is None:
+            return None
+        c = self.cfg
+        noise = np.diag([c.prior_sigma_rot**2] * 3 + [c.prior_sigma_trans**2] * 3)
+        return CameraMotion(self._velocity.rotation, self._velocity.translation,
+                            self._velocity.cov + noise, np.zeros(0, bool))
 
     def _drop(self, reason: str) -> tuple[None, None]:
         self.drops[reason] += 1
@@ -181,7 +224,9 @@ class Frontend:
             if n_pix - cv2.countNonZero(cv2.inRange(g, 1, 254)) > cfg.saturated_fraction * n_pix:
                 return self._drop("saturated")
         gl, gr = self.rig.rectify(gl, gr)
+        first = self._last_stamp is None
         frame = self.process_rectified(gl, gr)
+        self._advance_odometry(frame.motion, stamp_ns, first)
         self._last_stamp = stamp_ns
         self.frames += 1
         self.last_frame = frame
@@ -198,21 +243,68 @@ class Frontend:
             scan = self.scanner.from_points(pts, stamp_ns)
         return obs, scan
 
+    def _advance_odometry(self, motion: CameraMotion | None, stamp_ns: int, first: bool) -> None:
+        """Move the visual odometry's pose by this frame's camera motion (or its prediction)."""
+        estimated = motion is not None
+        if motion is None and not first:
+            self.vo_failures += 1
+            motion = self._prior()
+        if motion is None:  # a first frame, or no prior yet: no motion, no information
+            motion = CameraMotion.identity(np.diag([self.cfg.prior_sigma_rot**2] * 3
+                                                   + [self.cfg.prior_sigma_trans**2] * 3))
+        self._velocity = motion if estimated else self._velocity
+        t_bc = self.rig.t_base_rect
+        delta = t_bc @ motion.matrix() @ np.linalg.inv(t_bc)
+        cov = _body_covariance(motion, t_bc)
+        if self.odometry is None:  # the odom frame is base_link at the first frame
+            pose, delta = np.eye(4), np.eye(4)
+        else:
+            pose = self.odometry.pose @ delta
+        self.odometry = VisualOdometry(stamp_ns, pose, delta, cov, estimated or first)
+
     def process_rectified(self, left: np.ndarray, right: np.ndarray) -> StereoFrame:
-        """Detect, match, triangulate, describe and track on a rectified grey pair (H, W) uint8."""
+        """Detect, match, triangulate, describe, track and estimate the camera's motion on a
+        rectified grey pair (H, W) uint8."""
         cfg, rig = self.cfg, self.rig
         kps = self.features.detect(left, self._margin)
         m = match_stereo(left, right, kps.xy, cfg)
         kp = kps.take(m.index)
-        xy = np.rint(kp.xy)
+        xy = kp.xy if cfg.subpixel else np.rint(kp.xy)
         d = m.disparity
         z = rig.f * rig.baseline / d
         ok = (z >= cfg.min_depth) & (z <= cfg.max_depth)
-        desc, has = self.features.describe(left, Keypoints(xy, kp.response, kp.size))
+        desc, has = self.features.describe(left, Keypoints(xy, kp.response, kp.size, kp.octave))
         ok &= has
         xy, d, desc, strength = xy[ok], d[ok], desc[ok], kp.response[ok]
         args = (xy[:, 1], xy[:, 0], d, rig.f, rig.cx, rig.cy, rig.baseline)
         points = triangulate(*args)
         cov = triangulation_covariance(*args, cfg.sigma_d, cfg.sigma_r, cfg.sigma_c)
-        ids, length = self.tracker.update(xy, desc, points, cov)
-        return StereoFrame(xy, d, strength, points, cov, desc, ids, length, len(kps), len(m.index))
+        prev_xy, prev_pts, prev_cov = self.tracker.previous
+        prior = self._prior()
+        window = None
+        if prior is not None and prev_pts.shape[0] == prev_xy.shape[0]:
+            window = predict_pixels(prior, prev_pts, prev_cov, rig.f, rig.cx, rig.cy, cfg.keypoint_sigma_px)
+        prev = self.tracker.match(xy, desc, window)
+        pairs = np.flatnonzero(prev >= 0)
+        motion = estimate_motion(
+            prev_pts[prev[pairs]], prev_cov[prev[pairs]], xy[pairs], points[pairs], cov[pairs],
+            rig.f, rig.cx, rig.cy, gate=cfg.vo_gate, ransac_px=cfg.vo_ransac_px,
+            ransac_iterations=cfg.vo_ransac_iterations, min_inliers=cfg.vo_min_inliers,
+        ) if pairs.size else None
+        if motion is not None:
+            prev[pairs[~motion.inliers]] = -1  # inconsistent with the camera's motion: ends
+        ids, length = self.tracker.commit(xy, desc, points, cov, prev)
+        return StereoFrame(xy, d, strength, points, cov, desc, ids, length, len(kps), len(m.index), motion)
+
+
+def _body_covariance(motion: CameraMotion, t_body_cam: np.ndarray) -> np.ndarray:
+    """(6, 6) covariance of a camera motion moved to the body frame, T_b = A·T_c·A⁻¹ with
+    A = T_body_cam = [R_a | t_a], over (δθ, δt) of the body (rotation vector in the current body
+    frame, translation in the previous one): δθ_b = R_a·δθ, δt_b = R_a·δt + R_b·[t_a]×·δθ_b."""
+    r_a, t_a = t_body_cam[:3, :3], t_body_cam[:3, 3]
+    r_b = r_a @ motion.rotation @ r_a.T
+    jac = np.zeros((6, 6))
+    jac[:3, :3] = r_a
+    jac[3:, 3:] = r_a
+    jac[3:, :3] = r_b @ skew(t_a) @ r_a
+    return jac @ motion.cov @ jac.T

@@ -72,10 +72,14 @@ def _row_costs(
     inside = (cols >= 0) & (cols < w)
     strip = other[rows[:, :, None], np.clip(cols, 0, w - 1)[:, None, :]]  # (N, side, L)
     tpl = ref[rows[:, :, None], (x[:, None] + np.arange(-r, r + 1)[None, :])[:, None, :]]
-    win = sliding_window_view(strip, side, axis=2)  # (N, side, nd, side): [n, a, k, b]
-    # running sums over the template's columns b (per_col) and over the strip's columns (cs, cs2):
-    # a window part covering template columns [b0, b1) is a difference of two of them
-    per_col = np.cumsum(np.einsum("nab,nakb->nkb", tpl, win), axis=2)
+    # per_col[n, k, b] = Σ_a tpl[n, a, b]·strip[n, a, k + b], one batched (1 × side)·(side × nd)
+    # product per template column b (a tenth of the time of one einsum over the window view);
+    # then running sums over the template's columns b (per_col) and over the strip's columns
+    # (cs, cs2): a window part covering template columns [b0, b1) is a difference of two of them
+    per_col = np.empty((strip.shape[0], nd, side), np.float32)
+    for b in range(side):
+        per_col[:, :, b] = np.matmul(tpl[:, None, :, b], strip[:, :, b: b + nd])[:, 0, :]
+    per_col = np.cumsum(per_col, axis=2)
     zero = np.zeros((strip.shape[0], 1), np.float32)
     cs = np.concatenate([zero, np.cumsum(strip.sum(axis=1), axis=1)], axis=1)
     cs2 = np.concatenate([zero, np.cumsum((strip**2).sum(axis=1), axis=1)], axis=1)

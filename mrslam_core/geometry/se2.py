@@ -67,3 +67,10 @@ def quaternion_to_yaw(q: np.ndarray) -> np.ndarray:
     q = np.asarray(q, dtype=float)
     x, y, z, w = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
     return np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+
+
+def planar_from_matrix(pose: np.ndarray) -> np.ndarray:
+    """(3,) x [m], y [m], yaw [rad] of a (4, 4) homogeneous pose: its projection into the plane of
+    the map (yaw = atan2(R10, R00))."""
+    pose = np.asarray(pose, float)
+    return np.array([pose[0, 3], pose[1, 3], np.arctan2(pose[1, 0], pose[0, 0])])

@@ -204,7 +204,7 @@ def run(cfg: TeamConfig, progress: bool = False) -> dict:
         "wall_s": time.perf_counter() - wall, "outlier_matches": slam.outlier_pairs / slam.num_particles,
         "occupancy": {"probability": grid.probability(), "known": grid.observed.copy(), "origin": grid.origin,
                       "resolution": grid.res, "free_thresh": cfg.grid.free_below,
-                      "occupied_thresh": cfg.grid.occupied_above},
+                      "occupied_thresh": cfg.grid.occupied_above} if grid.observed.size else None,  # None: no scan came
     }
 
 

@@ -151,7 +151,7 @@ class SimConfig:
     """The simulation.
 
     Attributes:
-        world: a built-in world name (``office``, ``small``) or a path to a world YAML.
+        world: a built-in world name (``office``, ``small``, ``hall40x30``) or a path to a world YAML.
         physics_hz: physics steps per simulated second.
         seed: seeds the odometry noise and the procedural textures.
         texture_density: texels per metre on the floor, walls and furniture.

@@ -264,7 +264,7 @@ def _parse_boxes(path: Path, entries: Any):
 
 
 def load_world(name_or_path: str | Path) -> World:
-    """A built-in world by name (``office``, ``small``) or a world YAML file.
+    """A built-in world by name (``office``, ``small``, ``hall40x30``) or a world YAML file.
 
     Raises:
         SimError: unknown name, unreadable file, or a malformed field (named in the message).

@@ -91,7 +91,11 @@ def test_the_run_folder_holds_the_occupancy_map_as_a_ros_map_file(demo_run):
     pixels, meta = load_map_file(out / report["occupancy_map"])
     grid = report["config"]["team"]["grid"]
     assert meta["resolution"] == pytest.approx(grid["resolution"])
-    assert pixels.shape == (round(grid["size"][1] / grid["resolution"]), round(grid["size"][0] / grid["resolution"]))
+    # the grid grew from nothing by whole blocks on the block lattice, as far as the robots saw
+    block = round(grid["block"] / grid["resolution"])
+    assert pixels.shape[0] % block == 0 and pixels.shape[1] % block == 0
+    corner = [v / grid["block"] for v in meta["origin"][:2]]
+    assert corner == pytest.approx([round(v) for v in corner], abs=1e-6)
     free_m2 = (pixels == FREE).sum() * grid["resolution"] ** 2
     # the office has 213 m² of floor a robot can reach; the run explores more than 35 % of it
     assert free_m2 > 0.25 * 213 and (pixels == OCCUPIED).any()

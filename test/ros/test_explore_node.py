@@ -124,3 +124,47 @@ def test_the_node_logs_counters_of_either_severity_as_they_grow():
         assert all(getattr(node.explorer, attr) == 2 for attr, _, _ in EVENTS)
     finally:
         rclpy.shutdown()
+
+
+def test_the_published_map_follows_the_grid_as_it_grows():
+    """No /map before the first scan; then each /map is the grid as it is: a scan from the east of
+    (5, 5) and then one far to the south-west grow it, and the wall cell seen first keeps its value
+    at the same map position in both messages."""
+    import rclpy
+    from sensor_msgs.msg import LaserScan
+
+    from mrslam_ros.conversions import ns_to_stamp, occupancy_to_arrays, pose_with_covariance
+    from mrslam_ros.explore_node import ExploreNode
+
+    rclpy.init()
+    try:
+        node = ExploreNode()
+        maps = []
+        node.map_pub.publish = maps.append
+        node.publish_map()
+        assert maps == []
+        scan = LaserScan(angle_min=-0.2, angle_increment=0.02, range_min=0.0, range_max=4.0)
+        scan.ranges = [2.0] * 21
+        for k, pose in enumerate([np.array([5.0, 5.0, 0.0]), np.array([-6.0, -7.0, -np.pi / 2])]):
+            stamp = (k + 1) * 1_000_000_000
+            node.on_pose("robot1", pose_with_covariance(pose, np.eye(3) * 1e-4, stamp, "map"))
+            scan.header.stamp = ns_to_stamp(stamp)
+            node.on_scan("robot1", scan)
+            node.publish_map()
+            if k == 0:  # the wall cells seen first, 2 m east of (5, 5): centres (x, y) [m]
+                wall = node.grid.centre_of(np.argwhere(node.grid.occupied()))
+        assert node.scans_inserted == 2 and len(maps) == 2 and len(wall) >= 5
+        assert np.abs(wall[:, 0] - 7.0).max() < 0.1
+        seen = []
+        for msg in maps:
+            prob, known, origin, res = occupancy_to_arrays(msg)
+            assert (msg.info.height, msg.info.width) == prob.shape
+            ij = np.floor((wall[:, ::-1] - origin[1::-1]) / res).astype(int)
+            seen.append((origin[:2], prob.shape, prob[ij[:, 0], ij[:, 1]], known[ij[:, 0], ij[:, 1]]))
+        (o1, s1, p1, k1), (o2, s2, p2, k2) = seen
+        assert (o2 < o1).all() and s2[0] > s1[0] and s2[1] > s1[1]
+        np.testing.assert_allclose(o2, node.grid.origin)
+        assert k1.all() and k2.all() and (p1 > 0.65).all()
+        np.testing.assert_array_equal(p1, p2)
+    finally:
+        rclpy.shutdown()

@@ -79,7 +79,7 @@ def test_the_explorer_keeps_a_robots_target_against_a_marginally_better_one():
     from mrslam_core.exploration.explorer import Explorer
 
     def room(patch: bool) -> OccupancyGrid:
-        grid = OccupancyGrid(GridConfig(resolution=0.1, size=(8.0, 3.0), origin=(0.0, 0.0)))
+        grid = OccupancyGrid(GridConfig(resolution=0.1), extent=((0.0, 0.0), (8.0, 3.0)))
         grid.observed[:, 10:60] = True  # x 1–6 m seen free
         if patch:
             grid.observed[10:20, 34:38] = False
@@ -131,13 +131,21 @@ def test_astar_maze():
     assert astar(grid, (0, 0), (0, 2)) is None  # a blocked goal
 
 
+def _at(grid: OccupancyGrid, layer: np.ndarray, x, y):
+    """``layer`` (H, W) of ``grid`` at map points x, y [m] (broadcast), which must be on the grid."""
+    cells = grid.cell_of(np.stack(np.broadcast_arrays(np.asarray(x, float), np.asarray(y, float)), -1))
+    assert grid.inside(cells).all()
+    return layer[cells[..., 0], cells[..., 1]]
+
+
 def test_grid_marks_free_and_hits():
-    grid = OccupancyGrid(GridConfig(resolution=0.1, size=(5.0, 2.0), origin=(0.0, 0.0)))
+    grid = OccupancyGrid(GridConfig(resolution=0.1))
     grid.insert(np.array([0.05, 1.05, 0.0]), Scan(np.array([0.0]), np.array([2.0]), np.array([True])))
     p = grid.probability()
-    assert p[10, 20] > 0.65  # the end cell at x = 2.05
-    assert (p[10, 1:19] < 0.4).all()  # the cells the beam crossed
-    assert not grid.observed[10, 25]
+    assert _at(grid, p, 2.05, 1.05) > 0.65  # the end cell at x = 2.05
+    assert (_at(grid, p, np.arange(0.15, 1.9, 0.1), 1.05) < 0.4).all()  # the cells the beam crossed
+    assert (grid.centre_of(np.argwhere(grid.observed))[:, 0] < 2.1).all()  # nothing beyond the end
+    assert grid.observed.sum() == 21  # 20 crossed and the end
 
 
 def test_a_hit_on_a_teammate_marks_no_obstacle_but_proves_the_space_before_it_free():
@@ -146,13 +154,14 @@ def test_a_hit_on_a_teammate_marks_no_obstacle_but_proves_the_space_before_it_fr
     hit; the other, 1.2 m from the teammate, is an obstacle. teammate_radius 0: both are."""
     beams = Scan(np.array([0.0, np.pi / 2]), np.array([2.0, 0.8]), np.array([True, True]))
     pose, mate = np.array([0.05, 0.05, 0.0]), np.array([[2.45, 0.05]])
-    grid = OccupancyGrid(GridConfig(resolution=0.1, size=(5.0, 2.0), origin=(0.0, 0.0), teammate_radius=0.45))
+    grid = OccupancyGrid(GridConfig(resolution=0.1, teammate_radius=0.45))
     grid.insert(pose, beams, mate)
-    assert grid.occupied().sum() == 1 and grid.occupied()[8, 0]  # (0.05, 0.85): the y beam's end
-    assert grid.free()[0, 1:20].all() and not grid.observed[0, 20:].any()
-    off = OccupancyGrid(GridConfig(resolution=0.1, size=(5.0, 2.0), origin=(0.0, 0.0), teammate_radius=0.0))
+    assert grid.occupied().sum() == 1 and _at(grid, grid.occupied(), 0.05, 0.85)  # the y beam's end
+    assert _at(grid, grid.free(), np.arange(0.15, 2.0, 0.1), 0.05).all()
+    assert (grid.centre_of(np.argwhere(grid.observed))[:, 0] < 2.0).all()  # nothing beyond the hit
+    off = OccupancyGrid(GridConfig(resolution=0.1, teammate_radius=0.0))
     off.insert(pose, beams, mate)
-    assert off.occupied()[0, 20] and off.occupied().sum() == 2
+    assert _at(off, off.occupied(), 2.05, 0.05) and off.occupied().sum() == 2
     assert beams.without_hits_near(pose, np.zeros((0, 2)), 0.45) is beams
 
 
@@ -200,7 +209,7 @@ def test_grid_from_the_frontends_obstacle_scan():
     np.testing.assert_allclose(scan.bearings, [-0.05, 0.05])
     np.testing.assert_allclose(scan.ranges, [1.0, 2.0])
     assert scan.hit.tolist() == [True, False]
-    grid = OccupancyGrid(GridConfig(resolution=0.1, size=(4.0, 4.0), origin=(-2.0, -2.0)))
+    grid = OccupancyGrid(GridConfig(resolution=0.1))
     grid.insert(np.zeros(3), scan)
     assert grid.occupied().sum() == 1 and grid.free().sum() > 20
 
@@ -213,7 +222,7 @@ def test_paths_through_unobserved_cells_only_where_allowed(unknown_passable):
     it stands close); a sensor that sees every wall may."""
     from mrslam_core.exploration.explorer import planning_layers
 
-    grid = OccupancyGrid(GridConfig(resolution=0.1, size=(6.0, 4.0), origin=(0.0, 0.0)))
+    grid = OccupancyGrid(GridConfig(resolution=0.1), extent=((0.0, 0.0), (6.0, 4.0)))
     free = np.zeros(grid.shape, bool)
     free[1:10, 1:59] = True  # rows are y: y 0.1-1.0
     free[1:39, 50:59] = True  # x 5.0-5.9
@@ -238,7 +247,7 @@ def test_paths_through_unobserved_cells_only_where_allowed(unknown_passable):
 
 def _open_room() -> OccupancyGrid:
     """6 m × 4 m, the west 4 m observed free, the rest unknown: a frontier along x = 4 m."""
-    grid = OccupancyGrid(GridConfig(resolution=0.1, size=(6.0, 4.0), origin=(0.0, 0.0)))
+    grid = OccupancyGrid(GridConfig(resolution=0.1), extent=((0.0, 0.0), (6.0, 4.0)))
     grid.observed[:, :40] = True
     grid.logodds[:, :40] = -3.0
     return grid
@@ -375,7 +384,7 @@ def test_a_path_through_another_robot_is_kept_when_there_is_no_room_around_it():
     keeps its plain path (the follower waits for the other robot instead of giving the goal up)."""
     from mrslam_core.exploration.explorer import Explorer, planning_layers
 
-    grid = OccupancyGrid(GridConfig(resolution=0.1, size=(6.0, 4.0), origin=(0.0, 0.0)))
+    grid = OccupancyGrid(GridConfig(resolution=0.1), extent=((0.0, 0.0), (6.0, 4.0)))
     grid.observed[15:25, :] = True
     grid.logodds[15:25, :] = -3.0
     cfg = ExplorationConfig(robot_radius=0.2, keep_clear=0.9)
@@ -459,7 +468,7 @@ def test_a_robot_is_not_sent_to_the_unseen_ground_around_a_teammate(avoid_others
 
 def _wall_south() -> OccupancyGrid:
     """6 m × 4 m observed free, with a wall in the cells y 0.6–0.7 m along the whole width."""
-    grid = OccupancyGrid(GridConfig(resolution=0.1, size=(6.0, 4.0), origin=(0.0, 0.0)))
+    grid = OccupancyGrid(GridConfig(resolution=0.1), extent=((0.0, 0.0), (6.0, 4.0)))
     grid.observed[:] = True
     grid.logodds[:] = -3.0
     grid.logodds[6, :] = 3.0

@@ -9,7 +9,8 @@ from mrslam_core.configio import ConfigError, from_dict, to_dict
 from mrslam_core.frontend import Frontend, FrontendConfig
 from mrslam_core.frontend.features import harris
 from mrslam_core.frontend.obstacles import scan_from_points
-from mrslam_core.frontend.tracking import Tracker, select_spread
+from mrslam_core.frontend.spread import select_spread
+from mrslam_core.frontend.tracking import Tracker
 from mrslam_core.frontend.usurf import haar_responses, usurf
 
 
@@ -70,17 +71,24 @@ def test_a_dim_half_of_the_image_keeps_its_corners_with_the_cell_floor():
         FrontendConfig(harris_cell_floor=0.02)
 
 
+def _track(tr: Tracker, xy: np.ndarray, desc: np.ndarray, window=None) -> tuple[np.ndarray, np.ndarray]:
+    """One frame through the tracker: match in the window, then commit (no 3D points needed)."""
+    prev = tr.match(xy, desc, window)
+    n = xy.shape[0]
+    return tr.commit(xy, desc, np.zeros((n, 3)), np.zeros((n, 3, 3)), prev)
+
+
 def test_tracker_keeps_ids_and_counts_consecutive_frames():
     rng = np.random.default_rng(2)
     desc = rng.standard_normal((5, 64)).astype(np.float32)
     desc /= np.linalg.norm(desc, axis=1, keepdims=True)
     xy = rng.uniform(0, 300, (5, 2))
     tr = Tracker(FrontendConfig())
-    ids0, _ = tr.update(xy, desc)
-    ids1, len1 = tr.update(xy + 3.0, desc)
+    ids0, _ = _track(tr, xy, desc)
+    ids1, len1 = _track(tr, xy + 3.0, desc)
     np.testing.assert_array_equal(ids1, ids0)
     np.testing.assert_array_equal(len1, 2)
-    ids2, len2 = tr.update((xy + 200.0)[:2], desc[:2])  # jumped beyond track_radius_px: new tracks
+    ids2, len2 = _track(tr, (xy + 200.0)[:2], desc[:2])  # jumped beyond track_radius_px: new tracks
     assert set(ids2).isdisjoint(ids0) and np.all(len2 == 1)
 
 
@@ -92,15 +100,38 @@ def test_tracker_follows_the_common_image_motion_of_a_turning_robot():
     xy = np.column_stack([rng.uniform(120, 300, 12), rng.uniform(10, 230, 12)])
     moved = xy + [-100.0, 2.0] + rng.normal(0, 1.0, (12, 2))
     tr = Tracker(FrontendConfig())
-    ids0, _ = tr.update(xy, desc)
-    ids1, len1 = tr.update(moved, desc)
+    ids0, _ = _track(tr, xy, desc)
+    ids1, len1 = _track(tr, moved, desc)
     np.testing.assert_array_equal(ids1, ids0)
     np.testing.assert_array_equal(len1, 2)
     np.testing.assert_allclose(tr.shift, [-100.0, 2.0], atol=1.5)
     fixed = Tracker(FrontendConfig(track_search_px=0.0))  # gate around the old position only
-    ids0, _ = fixed.update(xy, desc)
-    ids1, len1 = fixed.update(moved, desc)
+    ids0, _ = _track(fixed, xy, desc)
+    ids1, len1 = _track(fixed, moved, desc)
     assert set(ids1).isdisjoint(ids0) and np.all(len1 == 1)
+
+
+def test_tracker_searches_where_the_predicted_motion_puts_each_point():
+    # a car's forward motion spreads the image out from the centre: no common shift, and points
+    # near the edge move 40+ px; the window sits at each point's predicted pixel
+    rng = np.random.default_rng(6)
+    desc = rng.standard_normal((10, 64)).astype(np.float32)
+    desc /= np.linalg.norm(desc, axis=1, keepdims=True)
+    xy = np.column_stack([rng.uniform(20, 300, 10), rng.uniform(20, 220, 10)])
+    expanded = 160 + 1.5 * (xy - 160)  # moved from the centre, up to 70 px
+    cov = np.broadcast_to(4.0 * np.eye(2), (10, 2, 2))
+    tr = Tracker(FrontendConfig())
+    ids0, _ = _track(tr, xy, desc)
+    ids1, len1 = _track(tr, expanded + 1.0, desc, (expanded, cov, np.ones(10, bool)))
+    np.testing.assert_array_equal(ids1, ids0)
+    tr2 = Tracker(FrontendConfig())
+    ids0, _ = _track(tr2, xy, desc)
+    usable = np.arange(10) != 4  # behind the camera: not searched
+    wrong = expanded.copy()
+    wrong[3] += [5.0, 0.0]  # 2.5 sigma off: outside the 99 % gate (3.03 sigma) only with less noise
+    wrong[5] += [7.0, 0.0]  # 3.5 sigma: outside
+    ids1, len1 = _track(tr2, expanded, desc, (wrong, cov, usable))
+    assert list(np.flatnonzero(len1 == 1)) == [4, 5]
 
 
 def test_select_spread_takes_one_per_cell_first():
@@ -178,49 +209,3 @@ def test_colour_and_16bit_pairs_are_converted(frontend_and_pair):
     obs, _ = fe.step(left.astype(np.uint16) << 8, right.astype(np.uint16) << 8, 2)
     assert obs is not None and not fe.drops
     assert fe.step(left, right, 2) == (None, None) and fe.drops == {"stamp_out_of_order": 1}
-
-
-def test_rigid_fit_recovers_a_known_motion_exactly():
-    from mrslam_core.geometry.rigid3d import fit_rigid_3d
-
-    rng = np.random.default_rng(4)
-    src = rng.uniform(-2, 2, (10, 3))
-    a = 0.3
-    rot = np.array([[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]])  # yaw of an optical frame
-    dst = src @ rot.T + [0.1, -0.02, 0.25]
-    r, t = fit_rigid_3d(src, dst)
-    np.testing.assert_allclose(r, rot, atol=1e-12)
-    np.testing.assert_allclose(t, [0.1, -0.02, 0.25], atol=1e-12)
-    mirrored = src * [1, 1, -1]  # a reflection is not a rotation: the fit stays proper
-    r, _ = fit_rigid_3d(src, mirrored)
-    assert np.linalg.det(r) == pytest.approx(1.0)
-
-
-def _tracked_scene(seed, n=12):
-    rng = np.random.default_rng(seed)
-    desc = rng.standard_normal((n, 64)).astype(np.float32)
-    desc /= np.linalg.norm(desc, axis=1, keepdims=True)
-    xy = rng.uniform(20, 300, (n, 2))
-    pts = np.column_stack([rng.uniform(-1.5, 1.5, n), rng.uniform(-0.5, 0.5, n), rng.uniform(1.0, 4.0, n)])
-    cov = np.broadcast_to(np.diag([1e-4, 1e-4, 4e-4]), (n, 3, 3)).copy()
-    a = 0.1  # the camera turned 0.1 rad and moved 5 cm forward: cur = Rᵀ(prev − t)
-    rot = np.array([[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]])
-    moved = (pts - [0.0, 0.0, 0.05]) @ rot + rng.normal(0, 0.005, (n, 3))
-    return xy, desc, pts, moved, cov
-
-
-def test_tracks_that_disagree_with_the_rigid_motion_end():
-    xy, desc, pts, moved, cov = _tracked_scene(5)
-    moved[[2, 7]] += [[0.0, 0.0, 0.4], [0.3, 0.0, 0.0]]  # a wrong disparity, a look-alike
-    tr = Tracker(FrontendConfig(track_consistency_gate=16.27))
-    ids0, _ = tr.update(xy, desc, pts, cov)
-    ids1, len1 = tr.update(xy + 2.0, desc, moved, cov)
-    assert tr.inconsistent == 2
-    assert set(np.flatnonzero(len1 == 1)) == {2, 7}
-    keep = np.setdiff1d(np.arange(12), [2, 7])
-    np.testing.assert_array_equal(ids1[keep], ids0[keep])
-    assert ids1[2] not in ids0 and ids1[7] not in ids0
-    plain = Tracker(FrontendConfig())  # gate 0: descriptors alone decide
-    plain.update(xy, desc, pts, cov)
-    _, len1 = plain.update(xy + 2.0, desc, moved, cov)
-    assert np.all(len1 == 2) and plain.inconsistent == 0

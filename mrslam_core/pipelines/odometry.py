@@ -1,0 +1,128 @@
+"""A robot's odometry input to the central mapper: wheel, visual, or both fused.
+
+``wheel`` and ``visual`` pass one source's planar poses through. ``fused`` combines them step by
+step: at each visual odometry pose (the frontend's frame stamps), the visual step since the
+previous one and the wheel odometry's step over the same interval (interpolated from its pose
+stream) are averaged with their information matrices,
+
+    Δ = (Qw⁻¹ + Qv⁻¹)⁻¹ (Qw⁻¹·Δw + Qv⁻¹·Δv),
+
+Qv the visual step's covariance (its twist covariance times the interval squared) and Qw the
+wheel step's under the filter's own motion model (:func:`mrslam_core.slam.motion.predict_motion`),
+and Δ is chained onto the fused pose. A step the visual odometry could not estimate arrives with
+the constant-velocity prediction and its large covariance, so the wheels carry it; a wheel that
+slips is outvoted by the images. Steps are short (one frame), so their angles are averaged as
+numbers.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from typing import Literal
+
+import numpy as np
+
+from mrslam_core.evaluation.metrics import interpolate_poses
+from mrslam_core.geometry.se2 import between, compose, wrap_angle
+from mrslam_core.slam.config import MotionConfig
+from mrslam_core.slam.motion import predict_motion
+
+OdometrySource = Literal["wheel", "visual", "fused"]
+SOURCES = ("wheel", "visual", "fused")
+
+
+def fuse_steps(wheel: np.ndarray, wheel_cov: np.ndarray, visual: np.ndarray, visual_cov: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """Information-weighted mean of two estimates (3,) of one planar step with (3, 3) covariances.
+
+    Returns:
+        (step (3,) [m, m, rad], covariance (3, 3)).
+    """
+    iw = np.linalg.inv(wheel_cov)
+    iv = np.linalg.inv(visual_cov)
+    cov = np.linalg.inv(iw + iv)
+    dv = np.asarray(visual, float).copy()
+    dv[2] = float(wheel[2]) + float(wrap_angle(dv[2] - wheel[2]))  # the same branch as the wheel's
+    step = cov @ (iw @ np.asarray(wheel, float) + iv @ dv)
+    step[2] = float(wrap_angle(step[2]))
+    return step, 0.5 * (cov + cov.T)
+
+
+class OdometryFusion:
+    """Fused planar odometry of one robot from its wheel and visual odometry streams.
+
+    Args:
+        motion: the wheel odometry's noise model (the filter's motion model).
+        max_pending: visual poses kept while the wheel odometry has not reached their stamp.
+
+    Attributes:
+        dropped: visual poses that could not be fused (older than the wheel stream's start, or
+            pushed out of the pending queue).
+    """
+
+    def __init__(self, motion: MotionConfig, max_pending: int = 50):
+        self.motion = motion
+        self._wheel: deque[tuple[int, np.ndarray]] = deque(maxlen=2000)
+        self._pending: deque[tuple[int, np.ndarray, np.ndarray]] = deque()
+        self._max_pending = max_pending
+        self._last: tuple[int, np.ndarray, np.ndarray] | None = None  # stamp, visual pose, fused pose
+        self.dropped = 0
+
+    def add_wheel(self, stamp_ns: int, pose: np.ndarray) -> list[tuple[int, np.ndarray]]:
+        """A wheel odometry pose (3,) at ``stamp_ns``; returns the fused poses it completes."""
+        if self._wheel and stamp_ns <= self._wheel[-1][0]:
+            return []
+        self._wheel.append((int(stamp_ns), np.asarray(pose, float)))
+        return self._drain()
+
+    def add_visual(self, stamp_ns: int, pose: np.ndarray, twist_cov: np.ndarray) -> list[tuple[int, np.ndarray]]:
+        """A visual odometry pose (3,) with the (3, 3) covariance of its body twist (vx, vy, ωz)
+        at ``stamp_ns``; returns the fused poses (stamp, pose (3,)) now known, oldest first."""
+        self._pending.append((int(stamp_ns), np.asarray(pose, float), np.asarray(twist_cov, float)))
+        while len(self._pending) > self._max_pending:
+            self._pending.popleft()
+            self.dropped += 1
+        return self._drain()
+
+    def _wheel_at(self, stamp_ns: int) -> np.ndarray | None:
+        t = np.array([s for s, _ in self._wheel], float)
+        if not len(t) or stamp_ns < t[0] or stamp_ns > t[-1]:
+            return None
+        return interpolate_poses(np.array([float(stamp_ns)]), t, np.array([p for _, p in self._wheel]))[0]
+
+    def _drain(self) -> list[tuple[int, np.ndarray]]:
+        out = []
+        while self._pending:
+            stamp, vpose, tcov = self._pending[0]
+            if not self._wheel or stamp > self._wheel[-1][0]:
+                break  # the wheels have not reached it yet
+            self._pending.popleft()
+            if self._wheel_at(stamp) is None:
+                self.dropped += 1
+                continue
+            if self._last is None:  # the first: the fused odometry starts at the wheel pose
+                fused = self._wheel_at(stamp)
+            else:
+                t0, v0, f0 = self._last
+                dt = (stamp - t0) * 1e-9
+                w0 = self._wheel_at(t0)
+                if w0 is None:
+                    w0 = self._wheel[0][1]
+                dw = between(w0, self._wheel_at(stamp))
+                qw = predict_motion(np.zeros((1, 3)), dw, self.motion, dt)[1][0]
+                step, _ = fuse_steps(dw, qw, between(v0, vpose), tcov * dt**2 + 1e-12 * np.eye(3))
+                fused = compose(f0, step)
+            self._last = (stamp, vpose, fused)
+            out.append((stamp, fused))
+        return out
+
+
+def propagate_planar(cov: np.ndarray, pose: np.ndarray, step: np.ndarray, step_cov: np.ndarray) -> np.ndarray:
+    """Covariance (3, 3) of pose ⊕ step, from the pose's (3, 3) and the step's (3, 3) (step in the
+    pose's body frame): F·Σ·Fᵀ + G·Q·Gᵀ, the Jacobians of compose (first order)."""
+    th = float(pose[2])
+    c, s = np.cos(th), np.sin(th)
+    dx, dy = float(step[0]), float(step[1])
+    f = np.array([[1.0, 0.0, -s * dx - c * dy], [0.0, 1.0, c * dx - s * dy], [0.0, 0.0, 1.0]])
+    g = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    return f @ cov @ f.T + g @ step_cov @ g.T
