@@ -168,8 +168,13 @@ def run_main(argv: list[str]) -> int:
     for name, r in report["robots"].items():
         f = res["robots"].get(name, {})
         line = f"  {name}: {r['poses']} updates"
+        if not r["poses"] and name in cfg_unknown(report):
+            line += " (not merged into the map: its map never aligned with the team's)"
         if "ate_rmse_m" in r:
             line += f", ATE {r['ate_rmse_m']:.3f} m (visual odometry {r['odom_ate_rmse_m']:.3f} m)"
+        if "vo_endpoint_error_m" not in f and "vo_end_translation_m" in f:
+            line += (f"; visual odometry ends {1e3 * f['vo_end_translation_m']:.1f} mm and "
+                     f"{f['vo_end_rotation_deg']:.2f}° from its start")
         if "vo_endpoint_error_m" in f:
             line += (f"; visual odometry end point {f['vo_endpoint_error_m']:.3f} m "
                      f"({f['vo_endpoint_error_pct']:.2f} % of {f['distance_m']:.1f} m), heading {f['vo_heading_error_deg']:+.2f}°")
@@ -179,6 +184,11 @@ def run_main(argv: list[str]) -> int:
           f"{u['p50']:.1f} p95 {u['p95']:.1f} ms; wall {res['wall_s']:.1f} s")
     print(f"report: {args.out / 'report.json'}")
     return 0
+
+
+def cfg_unknown(report: dict) -> list[str]:
+    """The robots a run's report lists as starting unknown."""
+    return list(report["config"].get("unknown_start", []))
 
 
 def main(argv: list[str]) -> int:

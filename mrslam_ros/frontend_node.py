@@ -8,7 +8,9 @@ side, runs :class:`mrslam_core.frontend.frontend.Frontend`, and publishes
 occupancy grid, LaserScan in ``<robot>/base_link``) and ``visual_odom`` (nav_msgs/Odometry of
 base_link in ``<robot>/visual_odom``, base_link at the first frame: the frontend's visual odometry,
 with the planar pose covariance and the body twist's covariance; frames whose motion could not be
-estimated are counted as ``vo_failures``). A frame without usable points still gives an
+estimated are counted as ``vo_failures``). Where the robot publishes wheel odometry (``odom``), its
+motion between two frames places the tracks' search windows; otherwise the visual odometry's own
+constant-velocity prediction does. A frame without usable points still gives an
 (empty) observation set, so the central node knows the robot is alive. Drops are counted and
 published on ``/diagnostics``, never raised: missing or bad camera_info, unpaired, late or
 duplicated images, wrong encodings or sizes, and whatever the frontend itself rejects.
@@ -17,6 +19,7 @@ duplicated images, wrong encodings or sizes, and whatever the frontend itself re
 from __future__ import annotations
 
 import sys
+from collections import deque
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -27,13 +30,14 @@ from sensor_msgs.msg import CameraInfo, Image, LaserScan, PointCloud2
 from mrslam_core.frontend.camera import StereoRig
 from mrslam_core.frontend.config import FrontendConfig
 from mrslam_core.frontend.errors import FrontendError
-from mrslam_core.geometry.se2 import planar_from_matrix
+from mrslam_core.geometry.se2 import between, planar_from_matrix
 from mrslam_ros.conversions import (
     ConversionError,
     camera_info_to_calibration,
     image_to_array,
     obstacle_scan_to_laser,
     observations_to_cloud,
+    odometry_to_pose,
     stamp_to_ns,
     visual_odometry_msg,
 )
@@ -81,6 +85,10 @@ class FrontendNode(Node):
         self.pub = self.create_publisher(PointCloud2, "observations", OBSERVATION_HISTORY)
         self.scan_pub = self.create_publisher(LaserScan, "scan", 10)
         self.vo_pub = self.create_publisher(Odometry, "visual_odom", 50)
+        # the robot's wheel odometry, when it has one, predicts the tracks' search windows
+        self._odom: deque[tuple[int, np.ndarray]] = deque(maxlen=500)
+        self._odom_at_frame: np.ndarray | None = None
+        self.create_subscription(Odometry, "odom", self.on_odom, 50)
         self._vo_cov = np.zeros((3, 3))  # the planar pose covariance of the visual odometry
         self._vo_stamp: int | None = None
         for i, side in enumerate(("left", "right")):
@@ -110,6 +118,30 @@ class FrontendNode(Node):
             self._rig_key = key
         return True
 
+    def on_odom(self, msg: Odometry) -> None:
+        try:
+            stamp, pose, _ = odometry_to_pose(msg)
+        except ConversionError as exc:
+            self.diag.count("bad_odometry", str(exc))
+            return
+        if not self._odom or stamp > self._odom[-1][0]:
+            self._odom.append((stamp, pose))
+
+    def _wheel_motion(self, stamp_ns: int) -> np.ndarray | None:
+        """The wheel odometry's base_link motion (4, 4) since the previous frame, or None when the
+        odometry does not reach both frames' stamps."""
+        from mrslam_core.evaluation.metrics import interpolate_poses
+        from mrslam_core.frontend.odometry import planar_motion
+
+        pose = None
+        if len(self._odom) >= 2 and self._odom[0][0] <= stamp_ns <= self._odom[-1][0]:
+            t = np.array([s for s, _ in self._odom], float)
+            pose = interpolate_poses(np.array([float(stamp_ns)]), t, np.array([p for _, p in self._odom]))[0]
+        last, self._odom_at_frame = self._odom_at_frame, pose
+        if pose is None or last is None:
+            return None
+        return planar_motion(between(last, pose))
+
     def on_image(self, side: int, msg: Image) -> None:
         pair = self.sync.add(side, stamp_to_ns(msg.header.stamp), msg)
         self.diag.mirror(self.sync.drops, "images_", "left/right images not paired")
@@ -124,9 +156,10 @@ class FrontendNode(Node):
         except ConversionError as exc:
             self.diag.count("bad_image", str(exc))
             return
-        obs, scan = self.frontend.step(l_img, r_img, stamp_to_ns(left.header.stamp),
-                                       right_stamp_ns=stamp_to_ns(right.header.stamp), encoding=left.encoding,
-                                       right_encoding=right.encoding)
+        stamp = stamp_to_ns(left.header.stamp)
+        obs, scan = self.frontend.step(l_img, r_img, stamp, right_stamp_ns=stamp_to_ns(right.header.stamp),
+                                       encoding=left.encoding, right_encoding=right.encoding,
+                                       odometry=self._wheel_motion(stamp))
         self.diag.mirror(self.frontend.drops, "frontend_", "rejected by the frontend")
         self.diag.mirror({"vo_failures": self.frontend.vo_failures}, "", "frames whose motion the visual odometry "
                          "could not estimate (the constant-velocity prediction stood in)")

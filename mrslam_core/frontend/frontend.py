@@ -154,7 +154,8 @@ class Frontend:
         self._margin = 2 * self.cfg.patch_radius + 1
         self.odometry: VisualOdometry | None = None
         self.vo_failures = 0
-        self._velocity: CameraMotion | None = None  # last motion, the constant-velocity prior
+        self._velocity: CameraMotion | None = None  # last estimated motion: constant velocity
+        self._tracking = False  # the last frame's motion was estimated: its velocity predicts
 
     def reset(self) -> None:
         """Forget tracks and the motion prior (e.g. after a gap in the stream); the visual
@@ -162,24 +163,48 @@ class Frontend:
         self.tracker.reset()
         self._last_stamp = None
         self._velocity = None
+        self._tracking = False
 
     def _prior(self) -> CameraMotion | None:
-        """The constant-velocity prediction of this frame's camera motion, with its covariance."""
+        """The constant-velocity prediction of this frame's camera motion, with its covariance:
+        the last estimated motion, widened by ``prior_sigma_rot`` and ``prior_sigma_trans``."""
         if self._velocity is None:
             return None
-        c = self.cfg
-        noise = np.diag([c.prior_sigma_rot**2] * 3 + [c.prior_sigma_trans**2] * 3)
         return CameraMotion(self._velocity.rotation, self._velocity.translation,
-                            self._velocity.cov + noise, np.zeros(0, bool))
+                            self._velocity.cov + self._prior_noise(), np.zeros(0, bool))
 
     def _drop(self, reason: str) -> tuple[None, None]:
         self.drops[reason] += 1
         return None, None
 
+    def motion_prior(self, odometry: np.ndarray | None = None) -> CameraMotion | None:
+        """The prediction of this frame's camera motion that places the tracks' search windows.
+
+        Args:
+            odometry: the robot's own (wheel) odometry since the previous frame, T_prev_cur of
+                base_link (4, 4) [m].
+
+        Returns:
+            That motion in the camera, if given; else the constant-velocity prediction when the
+            previous frame's motion was estimated; else None (the window falls back to the
+            frame's common image motion). Either prediction is uncertain by ``prior_sigma_rot``
+            and ``prior_sigma_trans`` per axis (the constant-velocity one also by the last
+            motion's own covariance).
+        """
+        if odometry is not None:
+            t_bc = self.rig.t_base_rect
+            cam = np.linalg.inv(t_bc) @ np.asarray(odometry, float) @ t_bc
+            return CameraMotion(cam[:3, :3], cam[:3, 3], self._prior_noise(), np.zeros(0, bool))
+        return self._prior() if self._tracking else None
+
+    def _prior_noise(self) -> np.ndarray:
+        c = self.cfg
+        return np.diag([c.prior_sigma_rot**2] * 3 + [c.prior_sigma_trans**2] * 3)
+
     def step(
         self, left: np.ndarray, right: np.ndarray, stamp_ns: int, *,
         right_stamp_ns: int | None = None, encoding: str | None = None,
-        right_encoding: str | None = None,
+        right_encoding: str | None = None, odometry: np.ndarray | None = None,
     ) -> tuple[ObservationSet | None, ObstacleScan | None]:
         """Process one stereo pair. Never raises: bad input is dropped and counted in ``drops``.
 
@@ -189,18 +214,21 @@ class Frontend:
             right_stamp_ns: right image time (ns), checked against ``max_stamp_skew_ns``.
             encoding, right_encoding: ROS image encodings (None: inferred from the array;
                 right_encoding defaults to encoding).
+            odometry: the robot's wheel odometry since the previous pair, T_prev_cur of base_link
+                (4, 4), to place the search windows (:meth:`motion_prior`); None: the visual
+                odometry's own prediction.
 
         Returns:
             (observations in base_link, possibly empty; obstacle scan), or (None, None) for a drop.
         """
         try:
             return self._step(left, right, stamp_ns, right_stamp_ns, encoding,
-                              right_encoding if right_encoding is not None else encoding)
+                              right_encoding if right_encoding is not None else encoding, odometry)
         except Exception as exc:  # noqa: BLE001 - the frontend must keep running; counted below
             self.last_error = f"{type(exc).__name__}: {exc}"
             return self._drop("internal_error")
 
-    def _step(self, left, right, stamp_ns, right_stamp_ns, encoding, right_encoding):
+    def _step(self, left, right, stamp_ns, right_stamp_ns, encoding, right_encoding, odometry):
         cfg = self.cfg
         if isinstance(stamp_ns, bool) or not isinstance(stamp_ns, (int, np.integer)) or stamp_ns < 0:
             return self._drop("bad_stamp")
@@ -225,7 +253,7 @@ class Frontend:
                 return self._drop("saturated")
         gl, gr = self.rig.rectify(gl, gr)
         first = self._last_stamp is None
-        frame = self.process_rectified(gl, gr)
+        frame = self.process_rectified(gl, gr, None if first else self.motion_prior(odometry))
         self._advance_odometry(frame.motion, stamp_ns, first)
         self._last_stamp = stamp_ns
         self.frames += 1
@@ -250,9 +278,9 @@ class Frontend:
             self.vo_failures += 1
             motion = self._prior()
         if motion is None:  # a first frame, or no prior yet: no motion, no information
-            motion = CameraMotion.identity(np.diag([self.cfg.prior_sigma_rot**2] * 3
-                                                   + [self.cfg.prior_sigma_trans**2] * 3))
+            motion = CameraMotion.identity(self._prior_noise())
         self._velocity = motion if estimated else self._velocity
+        self._tracking = estimated
         t_bc = self.rig.t_base_rect
         delta = t_bc @ motion.matrix() @ np.linalg.inv(t_bc)
         cov = _body_covariance(motion, t_bc)
@@ -262,9 +290,10 @@ class Frontend:
             pose = self.odometry.pose @ delta
         self.odometry = VisualOdometry(stamp_ns, pose, delta, cov, estimated or first)
 
-    def process_rectified(self, left: np.ndarray, right: np.ndarray) -> StereoFrame:
+    def process_rectified(self, left: np.ndarray, right: np.ndarray, prior: CameraMotion | None = None) -> StereoFrame:
         """Detect, match, triangulate, describe, track and estimate the camera's motion on a
-        rectified grey pair (H, W) uint8."""
+        rectified grey pair (H, W) uint8; ``prior`` places the search windows (None: the frame's
+        common image motion)."""
         cfg, rig = self.cfg, self.rig
         kps = self.features.detect(left, self._margin)
         m = match_stereo(left, right, kps.xy, cfg)
@@ -280,7 +309,6 @@ class Frontend:
         points = triangulate(*args)
         cov = triangulation_covariance(*args, cfg.sigma_d, cfg.sigma_r, cfg.sigma_c)
         prev_xy, prev_pts, prev_cov = self.tracker.previous
-        prior = self._prior()
         window = None
         if prior is not None and prev_pts.shape[0] == prev_xy.shape[0]:
             window = predict_pixels(prior, prev_pts, prev_cov, rig.f, rig.cx, rig.cy, cfg.keypoint_sigma_px)
@@ -297,14 +325,20 @@ class Frontend:
         return StereoFrame(xy, d, strength, points, cov, desc, ids, length, len(kps), len(m.index), motion)
 
 
-def _body_covariance(motion: CameraMotion, t_body_cam: np.ndarray) -> np.ndarray:
-    """(6, 6) covariance of a camera motion moved to the body frame, T_b = A·T_c·A⁻¹ with
-    A = T_body_cam = [R_a | t_a], over (δθ, δt) of the body (rotation vector in the current body
-    frame, translation in the previous one): δθ_b = R_a·δθ, δt_b = R_a·δt + R_b·[t_a]×·δθ_b."""
+def _body_jacobian(rotation: np.ndarray, t_body_cam: np.ndarray) -> np.ndarray:
+    """(6, 6) ∂(δθ_b, δt_b)/∂(δθ, δt) of a camera motion with rotation R moved to the body frame,
+    T_b = A·T_c·A⁻¹ with A = T_body_cam = [R_a | t_a] (rotation vectors in the current frames,
+    translations in the previous ones): δθ_b = R_a·δθ, δt_b = R_a·δt + R_b·[t_a]×·δθ_b."""
     r_a, t_a = t_body_cam[:3, :3], t_body_cam[:3, 3]
-    r_b = r_a @ motion.rotation @ r_a.T
+    r_b = r_a @ rotation @ r_a.T
     jac = np.zeros((6, 6))
     jac[:3, :3] = r_a
     jac[3:, 3:] = r_a
     jac[3:, :3] = r_b @ skew(t_a) @ r_a
+    return jac
+
+
+def _body_covariance(motion: CameraMotion, t_body_cam: np.ndarray) -> np.ndarray:
+    """(6, 6) covariance of a camera motion moved to the body frame (:func:`_body_jacobian`)."""
+    jac = _body_jacobian(motion.rotation, t_body_cam)
     return jac @ motion.cov @ jac.T

@@ -146,6 +146,7 @@ def estimate_motion(
     if n < max(MIN_PAIRS, min_inliers):
         return None
     k = np.array([[f, 0.0, cx], [0.0, f, cy], [0.0, 0.0, 1.0]])
+    cv2.setRNGSeed(0)  # OpenCV's RANSAC draws from its global generator: the same frames, the same motion
     ok, rvec, tvec, idx = cv2.solvePnPRansac(
         np.ascontiguousarray(prev, np.float64), np.ascontiguousarray(cur_xy, np.float64), k, None,
         iterationsCount=ransac_iterations, reprojectionError=ransac_px, confidence=0.999,
@@ -194,3 +195,13 @@ def predict_pixels(
     cq = jm @ motion.cov @ np.swapaxes(jm, 1, 2) + r.T @ cov @ r
     s = proj @ cq @ np.swapaxes(proj, 1, 2) + sigma_px**2 * np.eye(2)
     return uv, s, front
+
+
+def planar_motion(delta: np.ndarray) -> np.ndarray:
+    """(4, 4) T_prev_cur of a planar motion (3,) dx [m], dy [m], dθ [rad] in the previous base
+    frame (wheel odometry), for :meth:`Frontend.motion_prior`."""
+    dx, dy, dth = (float(v) for v in delta)
+    t = np.eye(4)
+    t[:3, :3] = so3_exp([0.0, 0.0, dth])
+    t[:3, 3] = [dx, dy, 0.0]
+    return t

@@ -12,7 +12,9 @@ own and merged by map alignment (``join_unknown``).
 The report holds, per robot, the filter's ATE against the ground truth, the visual odometry's
 alone (``odom_ate_rmse_m``; the same stamps), the visual odometry's end-point error in 3D
 (``vo_endpoint_error_m``, and as a percentage of the distance driven) and its heading error at the
-end (``vo_heading_error_deg``), and the frontend's points per frame and failed motions.
+end (``vo_heading_error_deg``), where the odometry ends up from its start (``vo_end_translation_m``,
+``vo_end_rotation_deg``: the drift of a camera that stood still), and the frontend's points per
+frame and failed motions.
 """
 
 from __future__ import annotations
@@ -149,6 +151,12 @@ def run(sequence: StereoSequence, cfg: DatasetRunConfig, progress=None) -> dict:
                 vo_figures[name] = vo_endpoint(odo, seg.ground_truth[idx])
         pts = np.array(points[name])
         fe = frontends[name]
+        if len(odo):  # where the visual odometry ends up, from its start (a still camera: its drift)
+            rel = np.linalg.inv(odo[0]) @ odo[-1]
+            vo_figures.setdefault(name, {}).update({
+                "vo_end_translation_m": float(np.linalg.norm(rel[:3, 3])),
+                "vo_end_rotation_deg": float(np.degrees(np.arccos(np.clip((np.trace(rel[:3, :3]) - 1) / 2, -1, 1)))),
+            })
         vo_figures.setdefault(name, {}).update({
             "frames": len(seg), "unusable_frames": unusable[name], "vo_failures": fe.vo_failures,
             "points_per_frame_mean": float(pts.mean()) if pts.size else 0.0,

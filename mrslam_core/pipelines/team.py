@@ -26,6 +26,7 @@ from mrslam_core.exploration.grid import OccupancyGrid, Scan
 from mrslam_core.frontend.camera import StereoRig
 from mrslam_core.frontend.config import FrontendConfig
 from mrslam_core.frontend.frontend import Frontend
+from mrslam_core.frontend.odometry import planar_motion
 from mrslam_core.geometry.se2 import between
 from mrslam_core.pipelines.central import CentralConfig, CentralMapper, MapCheckConfig
 from mrslam_core.sim.config import SimConfig
@@ -150,6 +151,7 @@ def run(cfg: TeamConfig, progress: bool = False) -> dict:
     grid = OccupancyGrid(cfg.grid)
     explorer = Explorer(cfg.exploration, names)
     odom0 = {n: sim.odometry(n)[0] for n in names}
+    at_frame = dict(odom0)  # each robot's odometry at its previous frame: the frontend's motion prior
     for n in names:
         mapper.add_odometry(n, sim.time_ns, odom0[n])
     rec = {n: {"t": [0.0], "est": [starts[i]], "gt": [starts[i]], "odom": [starts[i]]} for i, n in enumerate(names)}
@@ -162,8 +164,10 @@ def run(cfg: TeamConfig, progress: bool = False) -> dict:
         scans = {}
         for n in sim.frames_due():
             frame = sim.render_stereo(n)
-            obs, scan = frontends[n].step(frame.left, frame.right, frame.stamp_ns)
             odom = sim.odometry(n)[0]
+            delta = between(at_frame[n], odom)
+            at_frame[n] = odom
+            obs, scan = frontends[n].step(frame.left, frame.right, frame.stamp_ns, odometry=planar_motion(delta))
             mapper.add_odometry(n, frame.stamp_ns, odom)
             if obs is None:  # a dropped frame: the next set carries its motion
                 continue

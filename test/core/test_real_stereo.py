@@ -82,6 +82,7 @@ def test_still_euroc_pairs_give_no_visual_odometry_drift(euroc_micro, profile):
         fe.step(*seq.read(i), int(seq.frames[i].stamp_ns))
     pose = fe.odometry.pose
     angle = np.degrees(np.arccos(np.clip((np.trace(pose[:3, :3]) - 1) / 2, -1, 1)))
-    assert np.linalg.norm(pose[:3, 3]) <= 0.01  # measured 3.7 mm over 30 frames (4.5 s)
-    assert angle <= 0.2  # measured 0.17°
+    assert np.linalg.norm(pose[:3, 3]) <= 0.01  # measured 4.0 mm over 30 frames (4.4 s)
+    assert angle <= 0.2  # measured 0.198°; much of it looks like real motion: the estimate sits at
+    # 0.16-0.19° about the same axis over the last five frames
     assert fe.vo_failures == 0 and not fe.drops

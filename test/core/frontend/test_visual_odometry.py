@@ -105,3 +105,25 @@ def test_a_camera_motion_in_base_link_terms():
     cov = _body_covariance(m, t_bc)
     # the axes permute: base (x, y, z) = optical (z, −x, −y)
     np.testing.assert_allclose(np.diag(cov), [3e-4, 1e-4, 2e-4, 3e-2, 1e-2, 2e-2], rtol=1e-5)
+
+
+def test_wheel_odometry_becomes_the_cameras_motion_prior(small_rig):
+    """A base_link turn of 0.1 rad and 0.3 m forward, seen from the rig's camera (0.1 m ahead of
+    base_link, 0.5 m up, looking along base x): the camera turns about its −y (optical y is
+    down) and moves along its z, and sideways by the lever arm; uncertain by the prior's σ."""
+    from mrslam_core.frontend import Frontend
+    from mrslam_core.frontend.odometry import planar_motion
+
+    fe = Frontend(small_rig)
+    body = planar_motion(np.array([0.3, 0.0, 0.1]))
+    m = fe.motion_prior(body)
+    rect = small_rig.t_base_rect
+    np.testing.assert_allclose(rect @ m.matrix() @ np.linalg.inv(rect), body, atol=1e-12)
+    np.testing.assert_allclose(m.rotation, so3_exp([0.0, -0.1, 0.0]), atol=1e-12)
+    # the camera's own translation: 0.3 m forward plus the lever arm 0.1 m swung by 0.1 rad
+    lever = np.array([0.1 * np.cos(0.1) - 0.1, 0.1 * np.sin(0.1), 0.0])
+    t_body = np.array([0.3, 0.0, 0.0]) + lever
+    np.testing.assert_allclose(m.translation, [-t_body[1], 0.0, t_body[0]], atol=1e-12)
+    c = fe.cfg
+    np.testing.assert_allclose(np.diag(m.cov), [c.prior_sigma_rot**2] * 3 + [c.prior_sigma_trans**2] * 3)
+    assert fe.motion_prior() is None  # no odometry and no frame yet: no prediction
