@@ -55,6 +55,17 @@ def _parser() -> argparse.ArgumentParser:
     return ap
 
 
+def _parse(parser: argparse.ArgumentParser, argv: list[str]) -> argparse.Namespace | int:
+    """The parsed arguments, or the exit status: 2 after one line naming the mistake, 0 after --help."""
+    try:
+        return parser.parse_args(argv)
+    except _UsageError as exc:
+        print(f"{parser.prog}: {exc}", file=sys.stderr)
+        return 2
+    except SystemExit as exc:  # --help
+        return int(exc.code or 0)
+
+
 def import_main(argv: list[str]) -> int:
     """Run ``mrslam dataset import`` with ``argv`` (the words after ``import``).
 
@@ -63,13 +74,9 @@ def import_main(argv: list[str]) -> int:
     """
     from mrslam_ros.dataset_bag import write_dataset_bag
 
-    try:
-        args = _parser().parse_args(argv)
-    except _UsageError as exc:
-        print(f"{PROG}: {exc}", file=sys.stderr)
-        return 2
-    except SystemExit as exc:  # --help
-        return int(exc.code or 0)
+    args = _parse(_parser(), argv)
+    if isinstance(args, int):
+        return args
     try:
         if args.out.exists():
             raise BagError(f"--out {args.out} exists already (not overwriting)")
@@ -121,13 +128,9 @@ def run_main(argv: list[str]) -> int:
     from mrslam_core.evaluation.report import write_run
     from mrslam_core.pipelines.dataset import DatasetRunConfig, run
 
-    try:
-        args = _run_parser().parse_args(argv)
-    except _UsageError as exc:
-        print(f"{RUN}: {exc}", file=sys.stderr)
-        return 2
-    except SystemExit as exc:  # --help
-        return int(exc.code or 0)
+    args = _parse(_run_parser(), argv)
+    if isinstance(args, int):
+        return args
     over: dict = {}
     for key, value in (("split", args.split), ("max_frames", args.frames)):
         if value is not None:

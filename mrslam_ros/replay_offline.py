@@ -56,7 +56,7 @@ def feed(bag: Path, mapper: CentralMapper, progress: bool = True,
     from mrslam_ros.conversions import odometry_twist_covariance
 
     source = getattr(mapper.cfg, "source", lambda r: "wheel")  # the central node's odometry sources
-    fusion = {r: OdometryFusion(mapper.cfg.filter.motion) for r in mapper.robots if source(r) == "fused"}
+    fusion = {r: OdometryFusion(mapper.cfg.wheel_motion) for r in mapper.robots if source(r) == "fused"}
     topics = {}
     for r in mapper.robots:
         if source(r) in ("wheel", "fused"):

@@ -27,7 +27,7 @@ import sys
 import threading
 import time
 from collections import deque
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import partial
 from pathlib import Path
 
@@ -60,6 +60,7 @@ from mrslam_ros.conversions import (
 )
 from mrslam_ros.diagnostics import Diagnostics
 from mrslam_core.pipelines.odometry import OdometryFusion
+from mrslam_core.slam.config import MotionConfig
 from mrslam_ros.params import declare_config, read_config
 from mrslam_ros.spin import drop_untakeable, run_node
 
@@ -96,7 +97,10 @@ class SlamNodeConfig(CentralConfig):
             ``wheel`` (``/<robot>/odom``), ``visual`` (the frontend's ``/<robot>/visual_odom``,
             for robots without wheel odometry) or ``fused`` (both, step by step weighted by their
             covariances: :mod:`mrslam_core.pipelines.odometry`; the wheel steps' covariance is
-            the filter's motion model). The robot's odom frame is its source's.
+            ``wheel_motion``). The robot's odom frame is its source's, and the filter's motion
+            model (``filter.motion``) must describe that source's noise.
+        wheel_motion: the noise model of the wheel odometry, for ``fused`` robots only (the
+            weight of a wheel step against the visual step's own covariance).
     """
 
     map_frame: str = "map"
@@ -111,6 +115,7 @@ class SlamNodeConfig(CentralConfig):
     process_budget: float = 0.0
     discovery_wait: float = 3.0
     odometry: tuple[str, ...] = ("wheel",)
+    wheel_motion: MotionConfig = field(default_factory=MotionConfig)
 
     def __post_init__(self) -> None:
         from mrslam_core.pipelines.odometry import SOURCES
@@ -155,7 +160,7 @@ class SlamNode(Node):
         self.cloud_pub = self.create_publisher(PointCloud2, "/slam/landmarks", 1)
         self.marker_pub = self.create_publisher(MarkerArray, "/slam/landmark_markers", 1)
         self.particle_pub = self.create_publisher(PoseArray, "/slam/particles", 1)
-        self._fusion = {r: OdometryFusion(self.cfg.filter.motion) for r in robots if self.cfg.source(r) == "fused"}
+        self._fusion = {r: OdometryFusion(self.cfg.wheel_motion) for r in robots if self.cfg.source(r) == "fused"}
         odometry_specs = []
         for r in robots:
             if self.cfg.source(r) in ("wheel", "fused"):

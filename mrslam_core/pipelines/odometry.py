@@ -8,7 +8,8 @@ stream) are averaged with their information matrices,
     Δ = (Qw⁻¹ + Qv⁻¹)⁻¹ (Qw⁻¹·Δw + Qv⁻¹·Δv),
 
 Qv the visual step's covariance (its twist covariance times the interval squared) and Qw the
-wheel step's under the filter's own motion model (:func:`mrslam_core.slam.motion.predict_motion`),
+wheel step's under the wheels' noise model (a :class:`MotionConfig`, through
+:func:`mrslam_core.slam.motion.predict_motion`),
 and Δ is chained onto the fused pose. A step the visual odometry could not estimate arrives with
 the constant-velocity prediction and its large covariance, so the wheels carry it; a wheel that
 slips is outvoted by the images. Steps are short (one frame), so their angles are averaged as
@@ -52,7 +53,7 @@ class OdometryFusion:
     """Fused planar odometry of one robot from its wheel and visual odometry streams.
 
     Args:
-        motion: the wheel odometry's noise model (the filter's motion model).
+        motion: the wheel odometry's noise model.
         max_pending: visual poses kept while the wheel odometry has not reached their stamp.
 
     Attributes:

@@ -370,14 +370,6 @@ def test_sequence_checks_its_fields(tmp_path):
 
 
 # ----------------------------------------------------------------------------- real data
-@pytest.fixture
-def euroc_micro(shared_data: Path) -> Path:
-    folder = shared_data / "euroc_v101_micro"
-    if not (folder / "cam0" / "sensor.yaml").is_file():
-        pytest.skip(f"EuRoC micro sample not found at {folder}")
-    return folder
-
-
 def test_real_kitti_excerpt(kitti_dir):
     seq = open_sequence("kitti", kitti_dir)
     assert len(seq) == 51 and (seq.rig.width, seq.rig.height) == (1226, 370)

@@ -15,7 +15,7 @@ def test_two_robots_map_and_explore_the_small_world():
     # seeded (sim seed 0, filter seed 0); measured: explored 0.70, ATE 0.012 / 0.018 m against
     # odometry 0.055 / 0.480 m, 796 landmarks. The explored fraction after 15 s depends on the
     # frontier the first plans pick: over sim/filter seeds 0-5 it was 0.70-0.96 (ATE
-    # 0.010-0.031 m), seed 0 the lowest (docs/results.md, "Real stereo").
+    # 0.010-0.031 m), seed 0 the lowest (docs/results.md, "Real stereo imagery").
     # One robot's odometry can be as good as the filter over 15 s, so the bound against
     # dead reckoning is on the team, as in test_demo.
     cfg = replace(TeamConfig(robots=2, seconds=15.0), sim=SimConfig(world="small"))

@@ -36,3 +36,21 @@ def test_mistakes_get_one_line_and_status_2(kitti_dir, tmp_path, capsys, args, s
     assert main(["dataset", *args]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and says in err[0], err
+
+
+def test_a_corrupt_frame_is_counted_and_the_run_goes_on(kitti_dir, tmp_path, capsys):
+    import shutil
+
+    seq = tmp_path / "seq"
+    for side in ("image_l", "image_r"):
+        (seq / side).mkdir(parents=True)
+        for i in range(10):
+            shutil.copy(kitti_dir / side / f"{i:06d}.png", seq / side / f"{i:06d}.png")
+    shutil.copy(kitti_dir / "calib.txt", seq / "calib.txt")
+    (seq / "poses.txt").write_text("".join((kitti_dir / "poses.txt").read_text().splitlines(True)[:10]))
+    (seq / "image_l" / "000006.png").write_bytes(b"\x89PNG\r\n\x1a\n truncated")
+    out = tmp_path / "run"
+    assert main(["dataset", "run", "kitti", str(seq), "--out", str(out), "--quiet"]) == 0
+    report = json.loads((out / "report.json").read_text())
+    assert report["frontend"]["robot1"]["unusable_frames"] == 1
+    assert report["robots"]["robot1"]["poses"] == 9
