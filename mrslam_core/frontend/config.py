@@ -80,7 +80,6 @@ class FrontendConfig:
         vo_ransac_iterations: PnP RANSAC iterations.
         vo_min_inliers: fewer tracks in the gate: the frame's motion is unknown (counted in
             ``vo_failures``; the constant-velocity prior stands in, with its covariance).
-        subpixel: refine Harris corners to sub-pixel positions (cv2.cornerSubPix).
         min_depth: points nearer than this along the optical axis are dropped [m].
         max_depth: points farther than this are dropped [m].
         obstacle_min_height: lower edge of the obstacle band in base_link z [m].
@@ -131,7 +130,6 @@ class FrontendConfig:
     vo_ransac_px: float = 2.0
     vo_ransac_iterations: int = 100
     vo_min_inliers: int = 8
-    subpixel: bool = True
     min_depth: float = 0.2
     max_depth: float = 20.0
     obstacle_min_height: float = 0.05

@@ -17,7 +17,6 @@ from mrslam_core.frontend.spread import select_spread
 from mrslam_core.frontend.usurf import usurf
 
 DESCRIPTOR_DIM = {"usurf": 64, "orb": 256, "sift": 128}
-_SUBPIX_CRITERIA = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 10, 0.01)
 _SIFT_SIZE_PER_SCALE = 10.0
 _CANDIDATES = 2  # OpenCV detections per kept keypoint, for the spread to choose from  # SIFT keypoint diameter given to scale-less (Harris) keypoints, per s
 
@@ -80,12 +79,6 @@ def harris(image: np.ndarray, cfg: FrontendConfig, margin: int) -> Keypoints:
         rows, cols, strength = rows[keep], cols[keep], strength[keep]
     order = np.argsort(-strength, kind="stable")
     xy = np.stack([cols[order], rows[order]], axis=1).astype(float)
-    if cfg.subpixel and xy.shape[0]:
-        # the corner where the image gradients of its window are orthogonal to the offsets
-        # (cv2.cornerSubPix); a refinement leaving the pixel is a poor corner and is not used
-        fine = cv2.cornerSubPix(image, xy.astype(np.float32).reshape(-1, 1, 2).copy(),
-                                (cfg.harris_block_size + 1,) * 2, (-1, -1), _SUBPIX_CRITERIA).reshape(-1, 2)
-        xy = np.where(np.abs(fine - xy).max(axis=1, keepdims=True) <= 0.5, fine, xy)
     return Keypoints(xy, strength[order].astype(float), np.zeros(order.size))
 
 

@@ -298,7 +298,7 @@ class Frontend:
         kps = self.features.detect(left, self._margin)
         m = match_stereo(left, right, kps.xy, cfg)
         kp = kps.take(m.index)
-        xy = kp.xy if cfg.subpixel else np.rint(kp.xy)
+        xy = np.rint(kp.xy)
         d = m.disparity
         z = rig.f * rig.baseline / d
         ok = (z >= cfg.min_depth) & (z <= cfg.max_depth)
