@@ -43,7 +43,7 @@ from mrslam_ros.conversions import (
 )
 from mrslam_ros.diagnostics import Diagnostics
 from mrslam_ros.params import declare_config, read_config
-from mrslam_ros.qos import OBSERVATION_HISTORY
+from mrslam_ros.qos import OBSERVATION_HISTORY, ODOMETRY_HISTORY
 from mrslam_ros.spin import run_node
 from mrslam_ros.sync import ApproximateTimeSync
 
@@ -84,7 +84,9 @@ class FrontendNode(Node):
         self._rig_key = None
         self.pub = self.create_publisher(PointCloud2, "observations", OBSERVATION_HISTORY)
         self.scan_pub = self.create_publisher(LaserScan, "scan", 10)
-        self.vo_pub = self.create_publisher(Odometry, "visual_odom", 50)
+        # kept transient-local like wheel odometry: a central node that starts late still takes
+        # the robot's start from its first pose
+        self.vo_pub = self.create_publisher(Odometry, "visual_odom", ODOMETRY_HISTORY)
         # the robot's wheel odometry, when it has one, predicts the tracks' search windows
         self._odom: deque[tuple[int, np.ndarray]] = deque(maxlen=500)
         self._odom_at_frame: np.ndarray | None = None

@@ -17,7 +17,9 @@ accepts an integer for a float and names the key of anything else. Tuples and li
 an empty default is declared with its element type and read back as empty.
 
 Keys of the params file that no field declares (typos) are reported by :func:`unknown_overrides`;
-:func:`read_config` logs them, or raises with ``strict=True``.
+:func:`read_config` logs them, or raises with ``strict=True``. A params file can serve several
+nodes (a profile such as config/real_stereo.yaml, with a section per node): a key under a section
+the node does not have, and close to none of its names, is another node's and is not reported.
 """
 
 from __future__ import annotations
@@ -98,9 +100,16 @@ def declare_config(node: Node, default: Any, prefix: str = "") -> None:
 
 
 def unknown_overrides(node: Node) -> list[str]:
-    """Parameter overrides given to ``node`` (params file, ``-p``) that it never declared."""
+    """Parameter overrides given to ``node`` (params file, ``-p``) that it never declared and that
+    look meant for it: under a section (the first part of a dotted name) it declares, or close to
+    one of its names (``fliter.num_particles``, ``robts``). The others are left to the nodes that
+    share the params file (the slam node's ``filter`` in a frontend's profile); rclpy ignores
+    overrides a node never declares."""
     overrides = getattr(node, "_parameter_overrides", {})  # rclpy keeps them until declared
-    return sorted(k for k in overrides if not node.has_parameter(k) and not k.startswith(ROS_OWN))
+    declared = list(node.list_parameters([], 0).names)
+    sections = {name.split(".", 1)[0] for name in declared if "." in name}
+    return sorted(k for k in overrides if not node.has_parameter(k) and not k.startswith(ROS_OWN)
+                  and (k.split(".", 1)[0] in sections or difflib.get_close_matches(k, declared, n=1)))
 
 
 def read_config(node: Node, cls: type[T], prefix: str = "", strict: bool = False) -> T:

@@ -45,7 +45,8 @@ class BagPlayer:
             of the graph at once.
         start_delay: seconds to wait after that, publishing ``/clock`` at the bag's start: a
             publisher that has matched a subscription can still be unknown to that subscription
-            for a moment (DDS discovery is two-sided), and what it publishes then is lost.
+            for a moment (DDS discovery is two-sided), and what it publishes then is lost. The
+            first message of every CameraInfo topic goes out before it (:meth:`publish_calibration`).
 
     Raises:
         BagError: not a bag, a bad rate, or a topic whose message type is not importable.
@@ -93,6 +94,27 @@ class BagPlayer:
 
         self._clock_pub.publish(self._clock_cls(clock=ns_to_stamp(stamp_ns)))
 
+    def publish_calibration(self) -> int:
+        """Publish the first message of every ``sensor_msgs/msg/CameraInfo`` topic once, ahead of
+        the bag's time (not counted in ``published``); returns how many.
+
+        A camera's calibration is static, and a frontend drops every image pair until it has both
+        cameras' CameraInfo. Played only in their turn, the first ones went out in one burst with
+        the first two 450 kB images of a dataset bag, and in 9 of 23 live runs on a loaded 2-core
+        machine some were lost and repaired only by the reliable writer's next heartbeat, 3 s
+        later: 7-16 of KITTI's first frames were dropped (``no_camera_info``), and with them
+        the robot's start."""
+        wanted = {t for t in self.topics if self.info.topics[t].msgtype == "sensor_msgs/msg/CameraInfo"}
+        first: dict[str, bytes] = {}
+        if wanted:
+            for m in read_bag(self.path, sorted(wanted)):
+                first.setdefault(m.topic, m.data)
+                if len(first) == len(wanted):
+                    break
+        for topic, data in first.items():
+            self._pubs[topic].publish(data)
+        return len(first)
+
     def _wait_for_subscribers(self) -> None:
         """Until every topic has a matched subscription, or ``settle`` s after the last topic that
         gained one, at most ``wait_for_subscribers`` s. Waiting for every topic alone, a bag with
@@ -130,6 +152,7 @@ class BagPlayer:
         """
         if self.wait_for_subscribers > 0:
             self._wait_for_subscribers()
+        self.publish_calibration()
         if self.start_delay > 0:
             self.publish_clock(self.info.start_ns)
             self._sleep_until(time.monotonic() + self.start_delay, lambda _: self.info.start_ns)
