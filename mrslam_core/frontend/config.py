@@ -59,20 +59,22 @@ class FrontendConfig:
         sigma_c: σc [px] (000: 10).
         min_track_length: publish a point once seen in this many consecutive frames (000: 3).
         max_observations: B, at most this many observations per frame.
-        grid_cols: image grid columns for spreading the B observations.
+        grid_cols: image grid columns for spreading the detections and the B observations.
         grid_rows: image grid rows.
         track_descriptor_gate: E0 for frame-to-frame tracking (squared distance of unit vectors);
             None: the descriptor's own (:data:`TRACK_DESCRIPTOR_GATE`).
         track_ratio: best/second-best descriptor distance ratio for tracking.
-        track_radius_px: largest image motion of a point between consecutive frames, around the
-            frame's common motion [px].
+        track_radius_px: without a motion prediction (the first frames, after a motion the visual
+            odometry could not estimate), the largest image motion of a point between
+            consecutive frames, around the frame's common motion [px].
         track_search_px: radius in which the frame's common image motion (a turning robot) is
             looked for [px]; at most ``track_radius_px`` turns that search off.
         track_window_gate: χ² (2 dof) gate of a track's search window around its pixel predicted
             from the camera's motion (9.21: 99 %).
         keypoint_sigma_px: a keypoint's detection noise in the search window's covariance [px].
-        prior_sigma_rot: standard deviation of the constant-velocity motion prior per frame, per
-            axis [rad] (the camera's rotation this frame differs from the last one's by that).
+        prior_sigma_rot: standard deviation of the motion prediction per frame, per axis [rad]:
+            how far this frame's camera rotation may differ from the wheel odometry's, or from
+            the last frame's (constant velocity).
         prior_sigma_trans: the same for the translation, per axis [m].
         vo_gate: χ² (3 dof) gate of a continued track's 3D residual under the visual odometry's
             motion and both points' covariances; tracks outside it end (14.16: 3σ, 99.73 %).

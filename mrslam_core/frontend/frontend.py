@@ -1,9 +1,12 @@
 """The stereo frontend: one step per stereo pair, observations and an obstacle scan out.
 
-Per pair (000 sections 3.2, 6.1): rectify, detect in the left image, match along the rectified
-row, triangulate (eq. 12) with covariance R = J·Rsp·Jᵀ, describe, track over frames, and publish
-the points tracked for ``min_track_length`` consecutive frames, at most B of them spread over the
-image, in base_link (x forward, y left, z up).
+Per pair (000 sections 3.2, 6.1): rectify, detect in the left image (spread over a grid), match
+along the rectified row, triangulate (eq. 12) with covariance R = J·Rsp·Jᵀ, describe, track over
+frames in windows placed by the predicted camera motion, estimate the camera's motion from the
+continued tracks (visual odometry, :mod:`mrslam_core.frontend.odometry`; tracks that disagree
+with it end), and publish the points tracked for ``min_track_length`` consecutive frames, at most
+B of them spread over the image, in base_link (x forward, y left, z up), with the visual
+odometry's pose (:attr:`Frontend.odometry`).
 """
 
 from __future__ import annotations
