@@ -40,12 +40,18 @@ class _Parser(argparse.ArgumentParser):
         raise _UsageError(message)
 
 
-def _parser() -> argparse.ArgumentParser:
-    ap = _Parser(prog=PROG, description="write a KITTI odometry or EuRoC/ASL stereo sequence into a rosbag2 "
-                                        "with the nodes' topics")
+def _sequence_parser(prog: str, description: str, out: str) -> argparse.ArgumentParser:
+    """A parser of FORMAT PATH --out, the words both sub-commands start with."""
+    ap = _Parser(prog=prog, description=description)
     ap.add_argument("format", metavar="FORMAT", help=f"dataset layout: {' or '.join(FORMATS)}")
     ap.add_argument("path", metavar="PATH", type=Path, help="the sequence folder")
-    ap.add_argument("--out", type=Path, required=True, help="bag folder to create (must not exist)")
+    ap.add_argument("--out", type=Path, required=True, help=out)
+    return ap
+
+
+def _parser() -> argparse.ArgumentParser:
+    ap = _sequence_parser(PROG, "write a KITTI odometry or EuRoC/ASL stereo sequence into a rosbag2 with the "
+                                "nodes' topics", "bag folder to create (must not exist)")
     ap.add_argument("--storage", choices=sorted(STORAGES), default="mcap", help="rosbag2 storage (default mcap)")
     ap.add_argument("--split", type=int, default=1, metavar="K",
                     help="cut the sequence into K segments, one robot each, all starting at once (default 1)")
@@ -105,11 +111,8 @@ def import_main(argv: list[str]) -> int:
 
 
 def _run_parser() -> argparse.ArgumentParser:
-    ap = _Parser(prog=RUN, description="run a KITTI odometry or EuRoC/ASL stereo sequence through the stereo "
-                                       "frontends and the central mapper, offline, and write a run folder")
-    ap.add_argument("format", metavar="FORMAT", help=f"dataset layout: {' or '.join(FORMATS)}")
-    ap.add_argument("path", metavar="PATH", type=Path, help="the sequence folder")
-    ap.add_argument("--out", type=Path, required=True, help="run folder to write")
+    ap = _sequence_parser(RUN, "run a KITTI odometry or EuRoC/ASL stereo sequence through the stereo frontends "
+                               "and the central mapper, offline, and write a run folder", "run folder to write")
     ap.add_argument("--config", type=Path, default=PROFILE,
                     help="profile YAML (the central mapper's keys, frontend, and the run's split, join_unknown, "
                          "max_frames); default config/real_stereo.yaml")
