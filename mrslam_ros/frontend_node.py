@@ -165,6 +165,8 @@ class FrontendNode(Node):
         self.diag.mirror(self.frontend.drops, "frontend_", "rejected by the frontend")
         self.diag.mirror({"vo_failures": self.frontend.vo_failures}, "", "frames whose motion the visual odometry "
                          "could not estimate (the constant-velocity prediction stood in)")
+        self.diag.mirror({"track_gaps": self.frontend.track_gaps}, "", "pairs after a gap in the stream: "
+                         "every track ended")
         if obs is not None:
             self.publish_visual_odometry()
             self.pub.publish(observations_to_cloud(obs, f"{self.cfg.robot}/base_link"))

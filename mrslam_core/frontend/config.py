@@ -91,6 +91,11 @@ class FrontendConfig:
         obstacle_source: ``dense``: block-matching disparity on a reduced image; ``features``: the
             matched feature points only.
         dense_downsample: image reduction factor of the dense obstacle disparity.
+        max_track_gap: a pair later than this after the previous one starts new tracks and a new
+            motion prediction (a paused or restarted camera, frames lost on a link): what the
+            robot did in between is unknown to a frame-to-frame tracker, and tracks continued
+            across it would carry their landmarks past the central mapper's re-localisation;
+            counted as ``track_gaps`` [s].
         max_stamp_skew_ns: left/right stamps further apart than this drop the pair [ns].
         saturated_fraction: an image with more than this fraction of pixels at 0 or 255 is dropped.
     """
@@ -140,6 +145,7 @@ class FrontendConfig:
     scan_max_range: float = 8.0
     obstacle_source: Literal["dense", "features"] = "dense"
     dense_downsample: int = 2
+    max_track_gap: float = 1.0
     max_stamp_skew_ns: int = 5_000_000
     saturated_fraction: float = 0.9
 
@@ -155,7 +161,7 @@ class FrontendConfig:
             "max_features", "orb_levels", "harris_block_size", "usurf_scale", "patch_radius", "sigma_d",
             "sigma_r", "sigma_c", "min_track_length", "max_observations", "grid_cols",
             "grid_rows", "track_radius_px", "max_depth", "scan_bins", "scan_max_range",
-            "dense_downsample", "track_window_gate", "keypoint_sigma_px", "prior_sigma_rot",
+            "dense_downsample", "max_track_gap", "track_window_gate", "keypoint_sigma_px", "prior_sigma_rot",
             "prior_sigma_trans", "vo_gate", "vo_ransac_px", "vo_ransac_iterations", "vo_min_inliers",
         )
         for name in positive:

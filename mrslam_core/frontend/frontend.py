@@ -140,6 +140,7 @@ class Frontend:
         last_error: text of the last ``internal_error``.
         odometry: the visual odometry after the last processed pair (None before the first).
         vo_failures: processed pairs (after the first) whose motion could not be estimated.
+        track_gaps: pairs after a gap longer than ``max_track_gap``: every track ended there.
     """
 
     def __init__(self, rig: StereoRig, cfg: FrontendConfig | None = None, robot: str = "robot1"):
@@ -157,6 +158,7 @@ class Frontend:
         self._margin = 2 * self.cfg.patch_radius + 1
         self.odometry: VisualOdometry | None = None
         self.vo_failures = 0
+        self.track_gaps = 0
         self._velocity: CameraMotion | None = None  # last estimated motion: constant velocity
         self._tracking = False  # the last frame's motion was estimated: its velocity predicts
 
@@ -255,6 +257,9 @@ class Frontend:
             if n_pix - cv2.countNonZero(cv2.inRange(g, 1, 254)) > cfg.saturated_fraction * n_pix:
                 return self._drop("saturated")
         gl, gr = self.rig.rectify(gl, gr)
+        if self._last_stamp is not None and stamp_ns - self._last_stamp > cfg.max_track_gap * 1e9:
+            self.track_gaps += 1
+            self.reset()  # the visual odometry takes no motion over the gap: it is not known
         first = self._last_stamp is None
         frame = self.process_rectified(gl, gr, None if first else self.motion_prior(odometry))
         self._advance_odometry(frame.motion, stamp_ns, first)

@@ -199,7 +199,8 @@ class Processed:
         odom: (3,) the robot's odometry pose at the stamp, odom frame.
         step_ms: wall time of the filter step [ms].
         merged: the pose is in the map frame (False: an unknown-start robot not merged yet,
-            whose pose is in its own start frame).
+            whose pose is in its own start frame, or a robot back from silence awaiting its
+            re-localisation, at its dead-reckoned pose).
     """
 
     robot: str
@@ -258,6 +259,8 @@ class CentralMapper:
         self.drops: Counter[str] = Counter()
         self.update_ms: list[float] = []
         self.trajectory: dict[str, list[tuple[int, np.ndarray]]] = {r: [] for r in robots}
+        #: stamps of the updates made while the robot awaited its re-localisation (not reported)
+        self.held: dict[str, set[int]] = {r: set() for r in robots}
         self._odom: dict[str, deque[tuple[int, np.ndarray]]] = {r: deque(maxlen=cfg.odom_buffer) for r in robots}
         self._queue: list[tuple[int, int, int, ObservationSet]] = []
         self._queued: set[tuple[str, int]] = set()
@@ -413,8 +416,13 @@ class CentralMapper:
             seen = self._sighted.get(obs.robot, prev[0]) if self.cfg.relocalize_when_blind else prev[0]
         gap = (obs.stamp_ns - seen) * 1e-9
         tried = self._reloc_tried.get(obs.robot, seen)
-        if (filt is self.slam and 0 < self.cfg.relocalize_after < gap and obs.stamp_ns - tried >= 1e9
-                and self.cfg.filter.observation_model == "stereo_point" and len(obs) >= self.cfg.fusion.min_inliers):
+        relocalizing = (filt is self.slam and 0 < self.cfg.relocalize_after < gap
+                        and self.cfg.filter.observation_model == "stereo_point")
+        if relocalizing and len(obs) < self.cfg.fusion.min_inliers and obs.robot not in self._returning:
+            # back from silence with too few points to place it (a frontend's tracks start again
+            # after a gap): the gap stays open until a set can be aligned, and its sets wait
+            self._returning[obs.robot] = (self.cfg.relocalize_tries, seen)
+        if relocalizing and obs.stamp_ns - tried >= 1e9 and len(obs) >= self.cfg.fusion.min_inliers:
             self._reloc_tried[obs.robot] = obs.stamp_ns
             left = self._returning.get(obs.robot, (self.cfg.relocalize_tries, seen))[0] - 1
             if self._relocalize(obs, motion, gap, self._path_length(obs.robot, seen, obs.stamp_ns)):
@@ -455,9 +463,13 @@ class CentralMapper:
             filt = self.local.get(obs.robot, self.slam)
         est = filt.estimate()
         k = filt.index[obs.robot]
-        merged = filt is self.slam
-        if merged:
+        if filt is self.slam:
             self.trajectory[obs.robot].append((obs.stamp_ns, est.mean[k].copy()))
+            if held:
+                self.held[obs.robot].add(obs.stamp_ns)
+        # a robot back from silence and not placed again has no map pose yet, as an unknown-start
+        # robot before its merge: its dead-reckoned pose is neither published nor reported
+        merged = filt is self.slam and not held
         return Processed(obs.robot, obs.stamp_ns, est.mean[k].copy(), est.cov[k].copy(), odom, ms, merged)
 
     def _pose_at(self, robot: str, odom: np.ndarray) -> np.ndarray | None:
@@ -681,9 +693,11 @@ class CentralMapper:
 
     # ------------------------------------------------------------------ results
     def trajectories(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
-        """robot -> (stamps (N,) [ns], poses (N, 3) map frame) of every update made."""
+        """robot -> (stamps (N,) [ns], poses (N, 3) map frame) of every update made in the map
+        (not those awaiting a re-localisation)."""
         out = {}
         for r, rows in self.trajectory.items():
+            rows = [row for row in rows if row[0] not in self.held[r]]
             stamps = np.array([s for s, _ in rows], np.int64)
             poses = np.array([p for _, p in rows]).reshape(-1, 3)
             out[r] = (stamps, poses)
@@ -720,6 +734,7 @@ class CentralMapper:
             extra[f"odom_p_{k}"] = np.array([p for _, p in self._odom[r]], float).reshape(-1, 3)
             extra[f"traj_t_{k}"] = np.array([t for t, _ in self.trajectory[r]], np.int64)
             extra[f"traj_p_{k}"] = np.array([p for _, p in self.trajectory[r]], float).reshape(-1, 3)
+            extra[f"held_t_{k}"] = np.array(sorted(self.held[r]), np.int64)
         return save_checkpoint(self.slam, path, extra)
 
     @classmethod
@@ -751,6 +766,7 @@ class CentralMapper:
         for k, r in enumerate(mapper.robots):
             mapper._odom[r].extend(zip(extra[f"odom_t_{k}"].tolist(), extra[f"odom_p_{k}"]))
             mapper.trajectory[r] = list(zip(extra[f"traj_t_{k}"].tolist(), extra[f"traj_p_{k}"]))
+            mapper.held[r] = set(extra[f"held_t_{k}"].tolist()) if f"held_t_{k}" in extra else set()
         for i, (robot, stamp) in enumerate(state["queue"]):
             mapper.add_observations(ObservationSet(robot, int(stamp), extra[f"queue_z_{i}"], extra[f"queue_cov_{i}"],
                                                    extra[f"queue_desc_{i}"], extra[f"queue_tracks_{i}"]))

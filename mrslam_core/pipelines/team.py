@@ -174,6 +174,8 @@ def run(cfg: TeamConfig, progress: bool = False) -> dict:
             mapper.add_observations(obs)
             scans[n] = scan
         for done in mapper.process(flush=True):
+            if not done.merged:  # awaiting its re-localisation: no map pose to record or to map from
+                continue
             n = done.robot
             r = rec[n]
             r["t"].append(done.stamp_ns * 1e-9)

@@ -553,3 +553,29 @@ def test_a_mapper_resumed_between_two_map_checks_continues_exactly(tmp_path):
     ta, tb = a.trajectories()["robot1"], b.trajectories()["robot1"]
     np.testing.assert_array_equal(ta[0], tb[0])
     np.testing.assert_array_equal(ta[1], tb[1])
+
+
+def test_a_robot_back_from_silence_with_empty_sets_first_is_still_placed_by_its_observations():
+    """Silent from 2 to 10 s, then two sets without points (a frontend's tracks need three frames
+    after a gap), then a full one: the empty sets do not close the gap; the full one, 0.4 s
+    later, re-localises the robot."""
+    pts, desc = _world()
+    truth = np.array([1.0, 0.4, 0.1])
+    m = CentralMapper(CentralConfig(robots=("robot1",), start_poses=(0.0, 0.0, 0.0),
+                                    filter=FilterConfig(num_particles=50, seed=3, proposal="fastslam2")))
+    for i, t in enumerate(np.arange(0.0, 10.41, 0.2)):
+        x = 0.5 * t if t <= 2.0 else 1.0 + np.sin(np.pi * min(t - 2.0, 8.0) / 8.0)
+        m.add_odometry("robot1", int(round(t * S)), np.array([x, 0.0, 0.0]))
+        if t <= 2.0 + 1e-9:
+            m.add_observations(_seen("robot1", t, np.array([0.5 * t, 0.0, 0.0]), pts, desc, i))
+    for t in (10.0, 10.2):
+        m.add_observations(ObservationSet("robot1", int(round(t * S)), np.zeros((0, 3)), np.zeros((0, 3, 3)),
+                                          np.zeros((0, desc.shape[1]), np.float32)))
+    m.add_observations(_seen("robot1", 10.4, truth, pts, desc, 104))
+    done = m.process(flush=True)
+    (e,) = m.relocalizations
+    assert e["accepted"] and abs(e["gap_s"] - 8.4) < 1e-9, e
+    assert np.hypot(*(done[-1].pose[:2] - truth[:2])) < 0.03, done[-1].pose
+    assert m.drops["awaiting_relocalization"] == 2
+    t, _ = m.trajectories()["robot1"]  # the two waiting sets have no map pose: not reported
+    assert not {int(10.0 * S), int(round(10.2 * S))} & set(t.tolist()) and int(10.4 * S) in t

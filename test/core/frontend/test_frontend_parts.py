@@ -209,3 +209,19 @@ def test_colour_and_16bit_pairs_are_converted(frontend_and_pair):
     obs, _ = fe.step(left.astype(np.uint16) << 8, right.astype(np.uint16) << 8, 2)
     assert obs is not None and not fe.drops
     assert fe.step(left, right, 2) == (None, None) and fe.drops == {"stamp_out_of_order": 1}
+
+
+def test_a_gap_in_the_stream_ends_every_track(frontend_and_pair):
+    """The same still pair: tracks continue from frame to frame, but not across a 2 s gap (a
+    paused camera), and the visual odometry takes no motion over it."""
+    fe, (left, right) = frontend_and_pair
+    for stamp in (0, 200_000_000, 400_000_000):
+        fe.step(left, right, stamp)
+    before = set(fe.last_frame.track_ids)
+    assert fe.last_frame.track_length.max() == 3 and fe.track_gaps == 0
+    fe.step(left, right, 2_400_000_000)
+    assert fe.track_gaps == 1 and set(fe.last_frame.track_ids).isdisjoint(before)
+    assert np.all(fe.last_frame.track_length == 1) and fe.vo_failures == 0
+    np.testing.assert_allclose(fe.odometry.pose, np.eye(4), atol=1e-9)
+    fe.step(left, right, 2_600_000_000)  # and tracks again from there
+    assert fe.last_frame.track_length.max() == 2
