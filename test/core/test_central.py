@@ -333,18 +333,25 @@ def test_the_motion_over_a_gap_is_sampled_before_the_set_is_associated():
         assert m.slam.last_stamp["robot1"] == int(3.2 * S)
 
 
+def _silent_from_2_s(until: float, pts: np.ndarray, desc: np.ndarray) -> CentralMapper:
+    """robot1 drives along x at 0.5 m/s seeing the world until 2 s, then only its odometry (out
+    to x = 2 and back to 1 by 10 s) arrives until ``until`` [s]."""
+    m = CentralMapper(CentralConfig(robots=("robot1",), start_poses=(0.0, 0.0, 0.0),
+                                    filter=FilterConfig(num_particles=50, seed=3, proposal="fastslam2")))
+    for i, t in enumerate(np.arange(0.0, until + 0.01, 0.2)):
+        x = 0.5 * t if t <= 2.0 else 1.0 + np.sin(np.pi * min(t - 2.0, 8.0) / 8.0)
+        m.add_odometry("robot1", int(round(t * S)), np.array([x, 0.0, 0.0]))
+        if t <= 2.0 + 1e-9:
+            m.add_observations(_seen("robot1", t, np.array([0.5 * t, 0.0, 0.0]), pts, desc, i))
+    return m
+
+
 def test_a_robot_back_from_a_gap_gets_more_than_one_try():
     """The first set after the gap holds only 7 landmarks bunched together (no fit); the next
     one, a second later, is complete: that one re-localises the robot."""
     pts, desc = _world()
     truth = np.array([1.0, 0.4, 0.1])
-    m = CentralMapper(CentralConfig(robots=("robot1",), start_poses=(0.0, 0.0, 0.0),
-                                    filter=FilterConfig(num_particles=50, seed=3, proposal="fastslam2")))
-    for i, t in enumerate(np.arange(0.0, 11.01, 0.2)):
-        x = 0.5 * t if t <= 2.0 else 1.0 + np.sin(np.pi * min(t - 2.0, 8.0) / 8.0)
-        m.add_odometry("robot1", int(round(t * S)), np.array([x, 0.0, 0.0]))
-        if t <= 2.0 + 1e-9:
-            m.add_observations(_seen("robot1", t, np.array([0.5 * t, 0.0, 0.0]), pts, desc, i))
+    m = _silent_from_2_s(11.0, pts, desc)
     full = _seen("robot1", 10.0, truth, pts, desc, 99)
     bunch = np.argsort(np.linalg.norm(full.z - full.z[0], axis=1))[:7]
     m.add_observations(ObservationSet("robot1", full.stamp_ns, full.z[bunch], full.cov[bunch], full.descriptors[bunch]))
@@ -561,13 +568,7 @@ def test_a_robot_back_from_silence_with_empty_sets_first_is_still_placed_by_its_
     later, re-localises the robot."""
     pts, desc = _world()
     truth = np.array([1.0, 0.4, 0.1])
-    m = CentralMapper(CentralConfig(robots=("robot1",), start_poses=(0.0, 0.0, 0.0),
-                                    filter=FilterConfig(num_particles=50, seed=3, proposal="fastslam2")))
-    for i, t in enumerate(np.arange(0.0, 10.41, 0.2)):
-        x = 0.5 * t if t <= 2.0 else 1.0 + np.sin(np.pi * min(t - 2.0, 8.0) / 8.0)
-        m.add_odometry("robot1", int(round(t * S)), np.array([x, 0.0, 0.0]))
-        if t <= 2.0 + 1e-9:
-            m.add_observations(_seen("robot1", t, np.array([0.5 * t, 0.0, 0.0]), pts, desc, i))
+    m = _silent_from_2_s(10.4, pts, desc)
     for t in (10.0, 10.2):
         m.add_observations(ObservationSet("robot1", int(round(t * S)), np.zeros((0, 3)), np.zeros((0, 3, 3)),
                                           np.zeros((0, desc.shape[1]), np.float32)))
