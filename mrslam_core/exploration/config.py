@@ -26,7 +26,7 @@ class GridConfig:
             frame) ended on that robot's body: it proves the space up to it free and marks no
             obstacle. Robots see each other; mapped, a teammate that drove on leaves an obstacle
             where no one looks again, and inflated for planning it sealed a start room's door
-            (docs/results.md, session 14). The simulated Pioneer's body reaches 0.33 m from
+            (docs/results.md). The simulated Pioneer's body reaches 0.33 m from
             base_link; 0: off [m].
     """
 
@@ -55,7 +55,7 @@ class ExplorationConfig:
         coordinated: discount the utility of targets near already assigned ones (eq. 8–9);
             False sends every robot to its own best frontier.
         best_pair: assign the best (robot, target) pair first (Burgard et al. 2005) instead of
-            the robots in list order (002 eq. 8). Measured in docs/results.md, session 13: it
+            the robots in list order (002 eq. 8). Measured in docs/results.md: it
             frees robots that list order sent into each other, but over 14 closed-loop seeds it
             left more robots above 0.10 m (9 of 42 against 2 of 42).
         beta: weight of the travel cost V in argmax(U − β·V).
@@ -112,8 +112,8 @@ class ExplorationConfig:
         keep_arc: where the pure-pursuit arc is tighter than ``max_speed / max_turn_rate``,
             slow down to drive it instead of clipping the turn rate and swinging wide (see
             :func:`~mrslam_core.exploration.planning.pure_pursuit`; measured in docs/results.md:
-            session 8, fewer collisions with door frames but less area explored; session 15, on
-            in the team defaults: more explored and no robot lost over 9 fresh seeds).
+            fewer collisions with door frames but less area explored at first; later, on in the
+            team defaults: more explored and no robot lost over 9 fresh seeds).
         keep_clear: distance [m] between robot centres (base_link) that robots keep from each
             other: a robot's path keeps this far from the other robots' positions where there is
             room, and a robot does not drive forward (backward) while another robot's centre is
@@ -124,7 +124,7 @@ class ExplorationConfig:
             where there is room (else the plain path is kept), without ``keep_clear``'s holding.
             The occupancy grid leaves teammates out (``GridConfig.teammate_radius``); without
             this, paths ran through them: two robots crossing at the start drove into each other
-            and stood wedged for the rest of the run (docs/results.md, session 14). Measured
+            and stood wedged for the rest of the run (docs/results.md). Measured
             there at 0.8 m over 14 fresh closed-loop seeds: no wedge and more explored (65
             against 56 %), but more robots above 0.10 m (9 of 42 against 4 of 42), so off.
             The larger of this and ``keep_clear`` is used; 0: off.
@@ -133,7 +133,7 @@ class ExplorationConfig:
             and the long way does not come as near (0.2 m further or more): a stereo camera
             facing a wall nearer than its near limit sees nothing, and a robot that turned blind
             beside a wall came out 5-7° off in the recorded demos traced. On in the team defaults:
-            lower ATE, less explored (docs/results.md, session 15).
+            lower ATE, less explored (docs/results.md).
         turn_clearance: before a turn on the spot whose headings come nearer than this [m] to an
             occupied cell (rays from the robot's centre), the robot first backs straight away,
             up to 0.4 m and only where the space behind is free, until they no longer do; a
@@ -141,7 +141,7 @@ class ExplorationConfig:
             axle and the stereo near limit is 0.21 m from them, so a turn nearer than 0.33 m to
             a wall is blind; counted as ``turn_backoffs``. On in the team defaults at 0.6 m: with
             ``turn_stall_time``, 2 of 78 robots above 0.10 m over 26 closed-loop seeds against 7
-            of 78 without (docs/results.md, session 16).
+            of 78 without (docs/results.md).
         turn_stall_time: a robot turning on the spot whose heading moved less than 5° in this
             long is against something (a door jamb, a teammate: its body's corners swing out to
             0.33 m from its axle) and turns the other way round instead, once per turn; counted as

@@ -58,7 +58,7 @@ class MapCheckConfig:
         window: seconds of the robot's recent sets aligned together [s]. 3 s, not 2: after a
             blind turn a robot meets few old landmarks a set, and a longer window gathers the
             inliers a fit needs (closed loop, seeds 14-39: robots above 0.10 m 2 -> 1 of 78,
-            docs/results.md, session 16).
+            docs/results.md).
         age: only landmarks created at least this long before the check take part [s].
         min_inliers: fewest RANSAC inliers of a fit that may move the robot.
         min_gain: a fit that disagrees must explain at least this many more of the window's
@@ -69,8 +69,7 @@ class MapCheckConfig:
         shift: a fit closer than this to the estimate, and within ``turn``, agrees with it [m].
         turn: see ``shift`` [rad]. 2.5°: under ``gain_gate`` an estimate 2.5–5° off explains
             far fewer matches than its fit and is corrected (counted within 0.3 m it explained
-            about as many, and 2.5° moved no robot more than 5° did; docs/results.md, sessions
-            14–15).
+            about as many, and 2.5° moved no robot more than 5° did; docs/results.md).
         max_shift: a fit further than this from the estimate is not used [m].
         max_turn: a fit turned more than this from the estimate is not used [rad].
         sigma_xy: standard deviation added to the fit's own, per axis, when the poses are drawn [m].

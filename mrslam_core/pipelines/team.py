@@ -46,14 +46,14 @@ def _team_filter() -> FilterConfig:
     # 6-7 % with 0.25.
     # outlier_gate = chi2(3 dof, 0.99): a look-alike that passes the association gate only because
     # the pose is uncertain is left out of the pose proposal and the map. On recorded live demo
-    # runs (4 bags x 8 filter seeds, docs/results.md session 7) robots above 0.15 m went from
+    # runs (4 bags x 8 filter seeds, docs/results.md) robots above 0.15 m went from
     # 43 to 15 of 96; in closed loop (mrslam team, 16 seeds) 16 to 15 of 48.
     # track_gate 30 (chi2(3 dof) at 1 - 1e-6): a frontend track keeps its landmark through an
     # odometry step 3-4 sigma off, where every point of the set fell outside D0 and the set was
     # mapped again at the wrong heading (recorded demo d1, robot1 at 2.3 s: 0 of 12 points
     # associated, heading -4 deg in one step). Closed loop, seeds 0-8: robots above 0.10 m
     # 2 -> 0 of 27; the d1 recording over filter seeds 0-9: target met 0 -> 3 of 10
-    # (docs/results.md, session 10).
+    # (docs/results.md).
     return FilterConfig(
         num_particles=300,
         proposal="fastslam2",
@@ -75,28 +75,28 @@ def _team_exploration() -> ExplorationConfig:
     # first landmarks were mapped from particles already spread by 0.1-0.2 m of odometry, and the
     # heading they fixed for everything mapped later was off by 0.36 deg (median of 27 robots, 9
     # above 0.5 deg); standing, 0.12 deg (none above 0.5). Closed loop, seeds 0-8: target met in
-    # 3 -> 7 of 9 runs (docs/results.md, session 9).
+    # 3 -> 7 of 9 runs (docs/results.md).
     # keep_arc: the follower slows down to drive the pure-pursuit arc instead of swinging wide.
-    # Closed loop, fresh seeds 14-22 (docs/results.md, session 15): target met 7 -> 9 of 9 runs,
-    # robots above 0.10 m 2 -> 0 of 27, explored 53 -> 64 %. (Session 8, before robots left
-    # teammates out of the grid and recovered when boxed in, it cost exploration: a wedge.)
+    # Closed loop, fresh seeds 14-22 (docs/results.md): target met 7 -> 9 of 9 runs,
+    # robots above 0.10 m 2 -> 0 of 27, explored 53 -> 64 %. (Before robots left teammates out
+    # of the grid and recovered when boxed in, it cost exploration: a wedge.)
     # open_side_turns: 10 of the 11 blind spells (fewer than 3 points a set for 0.8 s or more)
     # of recorded demos d1 and d3 were turns of 29-212 deg with the camera 0.06-0.14 m from a
     # wall; in the two traced, the robot came out of the turn 3-7 deg off. With keep_arc and the
     # map check's gain gate (same seeds): met 9 of 9, summed ATE 0.122 -> 0.114 m, explored
     # 64 -> 58 %. Without it (keep_arc and the map check only): met 9 of 9, 0.123 m, 65 %: it costs
-    # exploration for an accuracy gain within the noise of 9 seeds (docs/results.md, session 15).
+    # exploration for an accuracy gain within the noise of 9 seeds (docs/results.md).
     # turn_clearance 0.6 m: before a turn on the spot whose headings pass nearer than 0.6 m to an
     # occupied cell, the robot backs straight away (up to 0.4 m, where the space behind is free);
     # the cameras sit 0.12 m ahead of the axle and see nothing nearer than 0.21 m. Closed loop
-    # (docs/results.md, session 16), seeds 14-27: robots above 0.10 m 2 -> 0 of 42, and the two
+    # (docs/results.md), seeds 14-27: robots above 0.10 m 2 -> 0 of 42, and the two
     # runs it missed were robots wedged (a turn on the spot against a door jamb, three robots
     # turning into each other), which the reversal of blocked turns (turn_stall_time, on by
     # default) frees; with both, fresh seeds 28-39: met 8 -> 9 of 12, robots above 0.10 m
     # 5 -> 2 of 36.
     # max_turn_rate 0.35 rad/s (16 px per frame): fresh seeds 28-39, met 10 -> 11 of 12, robots
     # above 0.10 m 1 -> 0 of 36, summed ATE 0.156 -> 0.108 m, explored 62 -> 60 % (the miss: a
-    # robot at 0.029 m, 32 % of its odometry's 0.09 m); docs/results.md, session 17.
+    # robot at 0.029 m, 32 % of its odometry's 0.09 m); docs/results.md.
     return ExplorationConfig(max_speed=0.35, max_turn_rate=0.35, robot_radius=0.4, start_delay=1.0, keep_arc=True,
                              open_side_turns=True, turn_clearance=0.6)
 

@@ -16,7 +16,7 @@ BIN = Path(sys.executable).parent
 
 # Issue 6's target, for every robot: ATE RMSE <= 0.10 m and <= 30 % of its odometry's ATE RMSE.
 # Live runs are not repeatable (DDS and thread timing change the exploration paths); live demos of
-# these defaults met it in 37 of 38 runs (docs/results.md, sessions 17-19). The miss: a robot
+# these defaults met it in 37 of 38 runs (docs/results.md). The miss: a robot
 # 2 degrees off after a turn mapped its teammates' corridor again instead of matching it.
 MAX_ATE_M = 0.10
 MAX_ATE_OVER_ODOM = 0.30
@@ -45,7 +45,7 @@ def test_the_team_is_localised_against_ground_truth(demo_run):
         assert r["poses"] >= 0.8 * 5 * 120, (name, r["poses"])  # 5 Hz frames, nearly all used
         assert r["ate_rmse_m"] <= MAX_ATE_M, (name, r)
         assert r["ate_rmse_m"] <= MAX_ATE_OVER_ODOM * r["odom_ate_rmse_m"], (name, r)
-    # the 38 live demos of sessions 17-19 explored 39-75 % of the office in 120 s
+    # the 38 live demos with the previous frontend explored 39-75 % of the office in 120 s
     assert report["explored_fraction"] > 0.35
 
 
