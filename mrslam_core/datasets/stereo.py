@@ -57,6 +57,7 @@ from mrslam_core.datasets.synthetic import R_BASE_OPTICAL
 from mrslam_core.frontend.camera import CameraCalibration, StereoRig, load_euroc_stereo
 from mrslam_core.frontend.errors import CameraModelError
 from mrslam_core.frontend.frontend import image_to_grey
+from mrslam_core.geometry.se2 import planar_from_matrix
 
 __all__ = [
     "FORMATS", "KITTI_PERIOD_NS", "MAX_GT_GAP_NS", "T_BASE_CAM", "DatasetError", "StereoFrameFiles",
@@ -170,7 +171,7 @@ class StereoSequence:
         if self.ground_truth is None:
             return None
         gt = self.ground_truth
-        return np.column_stack([gt[:, 0, 3], gt[:, 1, 3], np.arctan2(gt[:, 1, 0], gt[:, 0, 0])])
+        return planar_from_matrix(gt)
 
     def split(self, k: int) -> list[StereoSequence]:
         """Cut the sequence into k consecutive segments, as if k robots drove them at the same time.

@@ -316,9 +316,9 @@ class Frontend:
         args = (xy[:, 1], xy[:, 0], d, rig.f, rig.cx, rig.cy, rig.baseline)
         points = triangulate(*args)
         cov = triangulation_covariance(*args, cfg.sigma_d, cfg.sigma_r, cfg.sigma_c)
-        prev_xy, prev_pts, prev_cov = self.tracker.previous
+        _, prev_pts, prev_cov = self.tracker.previous
         window = None
-        if prior is not None and prev_pts.shape[0] == prev_xy.shape[0]:
+        if prior is not None:
             window = predict_pixels(prior, prev_pts, prev_cov, rig.f, rig.cx, rig.cy, cfg.keypoint_sigma_px)
         prev = self.tracker.match(xy, desc, window)
         pairs = np.flatnonzero(prev >= 0)

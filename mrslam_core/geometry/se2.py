@@ -70,7 +70,7 @@ def quaternion_to_yaw(q: np.ndarray) -> np.ndarray:
 
 
 def planar_from_matrix(pose: np.ndarray) -> np.ndarray:
-    """(3,) x [m], y [m], yaw [rad] of a (4, 4) homogeneous pose: its projection into the plane of
-    the map (yaw = atan2(R10, R00))."""
+    """(..., 3) x [m], y [m], yaw [rad] of (..., 4, 4) homogeneous poses: their projection into the
+    plane of the map (yaw = atan2(R10, R00))."""
     pose = np.asarray(pose, float)
-    return np.array([pose[0, 3], pose[1, 3], np.arctan2(pose[1, 0], pose[0, 0])])
+    return np.stack([pose[..., 0, 3], pose[..., 1, 3], np.arctan2(pose[..., 1, 0], pose[..., 0, 0])], axis=-1)

@@ -29,7 +29,7 @@ from mrslam_core.datasets.stereo import StereoSequence
 from mrslam_core.evaluation.metrics import interpolate_poses
 from mrslam_core.frontend.config import FrontendConfig
 from mrslam_core.frontend.frontend import Frontend
-from mrslam_core.geometry.se2 import between, compose, planar_from_matrix
+from mrslam_core.geometry.se2 import between, compose, planar_from_matrix, wrap_angle
 from mrslam_core.pipelines.central import CentralConfig, CentralMapper
 
 
@@ -77,7 +77,7 @@ def vo_endpoint(vo: np.ndarray, gt: np.ndarray) -> dict[str, float]:
     dyaw = planar_from_matrix(rel_vo)[2] - planar_from_matrix(rel_gt)[2]
     return {"vo_endpoint_error_m": err, "distance_m": dist,
             "vo_endpoint_error_pct": 100.0 * err / dist if dist > 0 else float("nan"),
-            "vo_heading_error_deg": float(np.degrees(np.arctan2(np.sin(dyaw), np.cos(dyaw))))}
+            "vo_heading_error_deg": float(np.degrees(wrap_angle(dyaw)))}
 
 
 def run(sequence: StereoSequence, cfg: DatasetRunConfig, progress=None) -> dict:
@@ -143,7 +143,8 @@ def run(sequence: StereoSequence, cfg: DatasetRunConfig, progress=None) -> dict:
         tr = {"t": t * 1e-9, "est": poses, "gt": None, "odom": None}
         if len(idx):
             stamps = seg.stamps_ns[idx].astype(float)
-            odo_planar = np.array([compose(starts[j], between(planar_from_matrix(odo[0]), planar_from_matrix(p))) for p in odo])
+            planar = planar_from_matrix(odo)
+            odo_planar = compose(starts[j], between(planar[0], planar))
             tr["odom"] = interpolate_poses(t.astype(float), stamps, odo_planar) if len(t) else None
             if seg.ground_truth is not None:
                 gt_planar = seg.planar_ground_truth()[idx]

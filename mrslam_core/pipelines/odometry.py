@@ -19,8 +19,6 @@ numbers.
 from __future__ import annotations
 
 from collections import deque
-from typing import Literal
-
 import numpy as np
 
 from mrslam_core.evaluation.metrics import interpolate_poses
@@ -28,7 +26,6 @@ from mrslam_core.geometry.se2 import between, compose, wrap_angle
 from mrslam_core.slam.config import MotionConfig
 from mrslam_core.slam.motion import predict_motion
 
-OdometrySource = Literal["wheel", "visual", "fused"]
 SOURCES = ("wheel", "visual", "fused")
 
 
@@ -85,31 +82,30 @@ class OdometryFusion:
             self.dropped += 1
         return self._drain()
 
-    def _wheel_at(self, stamp_ns: int) -> np.ndarray | None:
-        t = np.array([s for s, _ in self._wheel], float)
-        if not len(t) or stamp_ns < t[0] or stamp_ns > t[-1]:
-            return None
-        return interpolate_poses(np.array([float(stamp_ns)]), t, np.array([p for _, p in self._wheel]))[0]
-
     def _drain(self) -> list[tuple[int, np.ndarray]]:
-        out = []
+        out: list[tuple[int, np.ndarray]] = []
+        if not self._wheel:
+            return out
+        t = np.array([s for s, _ in self._wheel], float)
+        poses = np.array([p for _, p in self._wheel])
+
+        def wheel_at(stamp_ns: int) -> np.ndarray:
+            return interpolate_poses(np.array([float(stamp_ns)]), t, poses)[0]
+
         while self._pending:
             stamp, vpose, tcov = self._pending[0]
-            if not self._wheel or stamp > self._wheel[-1][0]:
+            if stamp > t[-1]:
                 break  # the wheels have not reached it yet
             self._pending.popleft()
-            if self._wheel_at(stamp) is None:
+            if stamp < t[0]:
                 self.dropped += 1
                 continue
             if self._last is None:  # the first: the fused odometry starts at the wheel pose
-                fused = self._wheel_at(stamp)
+                fused = wheel_at(stamp)
             else:
                 t0, v0, f0 = self._last
                 dt = (stamp - t0) * 1e-9
-                w0 = self._wheel_at(t0)
-                if w0 is None:
-                    w0 = self._wheel[0][1]
-                dw = between(w0, self._wheel_at(stamp))
+                dw = between(wheel_at(max(t0, int(t[0]))), wheel_at(stamp))
                 qw = predict_motion(np.zeros((1, 3)), dw, self.motion, dt)[1][0]
                 step, _ = fuse_steps(dw, qw, between(v0, vpose), tcov * dt**2 + 1e-12 * np.eye(3))
                 fused = compose(f0, step)
