@@ -39,14 +39,16 @@ class BagPlayer:
         clock_hz: ``/clock`` messages per second of wall time between bag messages.
         wait_for_subscribers: seconds to wait, before the first message, until every topic of
             the bag has at least one matched subscription (0: start at once); see ``settle``.
+            A publisher that has matched a subscription can still be unknown to that subscription
+            for a moment (DDS discovery is two-sided), and what it publishes then is lost: so the
+            first message of every topic then goes out ahead of the bag's time and the player waits,
+            within the same bound, until every matched reliable subscription acknowledged it
+            (:meth:`publish_first`).
         settle: once some topics have a matched subscription, stop waiting when no other topic
             gained one for this long [s]: the rest have no subscriber in the graph (a dataset bag's
             ground truth and /tf_static), and a new participant is discovered with every endpoint
             of the graph at once.
-        start_delay: seconds to wait after that, publishing ``/clock`` at the bag's start: a
-            publisher that has matched a subscription can still be unknown to that subscription
-            for a moment (DDS discovery is two-sided), and what it publishes then is lost. The
-            first message of every CameraInfo topic goes out before it (:meth:`publish_calibration`).
+        start_delay: seconds to wait after that, publishing ``/clock`` at the bag's start.
 
     Raises:
         BagError: not a bag, a bad rate, or a topic whose message type is not importable.
@@ -94,17 +96,28 @@ class BagPlayer:
 
         self._clock_pub.publish(self._clock_cls(clock=ns_to_stamp(stamp_ns)))
 
-    def publish_calibration(self) -> int:
-        """Publish the first message of every ``sensor_msgs/msg/CameraInfo`` topic once, ahead of
-        the bag's time (not counted in ``published``); returns how many.
+    def publish_first(self, prime: bool) -> set[str]:
+        """Publish the first message of topics ahead of the bag's time; returns those topics (their
+        first message is not published again in its turn, and is counted in ``published``).
 
-        A camera's calibration is static, and a frontend drops every image pair until it has both
-        cameras' CameraInfo. Played only in their turn, the first ones went out in one burst with
-        the first two 450 kB images of a dataset bag, and in 9 of 23 live runs on a loaded 2-core
-        machine some were lost and repaired only by the reliable writer's next heartbeat, 3 s
-        later: 7-16 of KITTI's first frames were dropped (``no_camera_info``), and with them
-        the robot's start."""
-        wanted = {t for t in self.topics if self.info.topics[t].msgtype == "sensor_msgs/msg/CameraInfo"}
+        Args:
+            prime: every topic, then wait until each matched reliable subscription acknowledged
+                its first message (at most ``wait_for_subscribers`` s in all): a subscription acks
+                only once it knows the publisher, so this ends the two-sided discovery that a
+                matched count on the publisher's side does not. In one CI run a central
+                node lost a robot's first 1.6 s of sets, played after the matched count and a 1 s
+                start delay. Without ``prime``
+                only the ``sensor_msgs/msg/CameraInfo`` topics: a camera's calibration is static,
+                and a frontend drops every image pair until it has both cameras' CameraInfo.
+                Played only in their turn, they went out in one burst with the first two 450 kB
+                images of a dataset bag, and in 9 of 23 live runs on a loaded 2-core machine some
+                were lost and repaired only by the reliable writer's next heartbeat, 3 s later:
+                7-16 of KITTI's first frames were dropped (``no_camera_info``).
+        """
+        from rclpy.duration import Duration
+
+        wanted = set(self.topics) if prime else {
+            t for t in self.topics if self.info.topics[t].msgtype == "sensor_msgs/msg/CameraInfo"}
         first: dict[str, bytes] = {}
         if wanted:
             for m in read_bag(self.path, sorted(wanted)):
@@ -113,7 +126,15 @@ class BagPlayer:
                     break
         for topic, data in first.items():
             self._pubs[topic].publish(data)
-        return len(first)
+            self.published[topic] += 1
+        if prime:
+            end = time.monotonic() + self.wait_for_subscribers
+            for topic in first:
+                left = end - time.monotonic()
+                if left <= 0 or self._stop:
+                    break
+                self._pubs[topic].wait_for_all_acked(Duration(nanoseconds=int(left * 1e9)))
+        return set(first)
 
     def _wait_for_subscribers(self) -> None:
         """Until every topic has a matched subscription, or ``settle`` s after the last topic that
@@ -152,7 +173,7 @@ class BagPlayer:
         """
         if self.wait_for_subscribers > 0:
             self._wait_for_subscribers()
-        self.publish_calibration()
+        ahead = self.publish_first(prime=self.wait_for_subscribers > 0)
         if self.start_delay > 0:
             self.publish_clock(self.info.start_ns)
             self._sleep_until(time.monotonic() + self.start_delay, lambda _: self.info.start_ns)
@@ -167,6 +188,10 @@ class BagPlayer:
 
             self.publish_clock(t0_bag)
             for m in read_bag(self.path, self.topics):
+                if m.topic in ahead:  # its first message went out ahead of time (first pass only)
+                    ahead.discard(m.topic)
+                    total += 1
+                    continue
                 self._sleep_until(t0_wall + (m.stamp_ns - t0_bag) * 1e-9 / self.rate, bag_ns_at)
                 if self._stop:
                     break
