@@ -1,7 +1,7 @@
 """``mrslam bench filter``: time of a full team step of the multi-robot filter.
 
 Synthetic stereo world, K robots, B observations per robot and step, a map of N landmarks already
-held by every particle; a step = every robot's motion sample, association, EKF updates, new
+held by every particle (shared from a common ancestor, each particle's own near the robots); a step = every robot's motion sample, association, EKF updates, new
 landmarks and weighting, plus resampling when due. Single-threaded numpy (set
 OMP/OPENBLAS threads to 1 before numpy loads for a one-core figure).
 """
@@ -22,18 +22,27 @@ from mrslam_core.slam.filter import MultiRobotFastSLAM
 
 
 def prefill(slam: MultiRobotFastSLAM, world: SyntheticWorld, sigma: float, seed: int) -> None:
-    """Give every particle the world's landmarks (noisy means, isotropic covariance σ² [m²])."""
+    """Give the particles the world's landmarks as a running filter holds them: one map inherited
+    from a common ancestor (noisy means, isotropic covariance σ² [m²]), shared by every particle,
+    and a copy of its own of each landmark within sensing range of a robot's start (the area
+    mapped since the particles last had a common ancestor)."""
     rng = np.random.default_rng(seed)
     store = slam.landmarks
     n = world.landmarks.shape[0]
     slots = store.allocate(n, world.descriptors)
     order = np.lexsort((world.landmarks[:, 1] // 2.0, world.landmarks[:, 0] // 2.0))
     slots = slots[np.argsort(order)]  # slots in creation order are near each other, as when mapped
-    for m in range(slam.num_particles):  # set-up only: every particle its own noisy copy
-        ms = np.full(n, m)
-        noisy = world.landmarks + sigma * rng.standard_normal((n, 3))
-        store.write(ms, slots, mean=noisy, cov=np.eye(3) * sigma**2, exists=True, count=5)
-    store.refresh_reference(slots)
+    common = world.landmarks + sigma * rng.standard_normal((n, 3))
+    store.write(np.zeros(n, np.int64), slots, mean=common, cov=np.eye(3) * sigma**2, exists=True, count=5)
+    m = slam.num_particles
+    store.copy_rows(np.arange(1, m), np.zeros(m - 1, np.int64))
+    store.set_reference(slots, common)
+    d = np.linalg.norm(world.landmarks[:, None, :2] - world.start_poses()[None, :, :2], axis=2)
+    recent = np.flatnonzero(d.min(axis=1) < world.cfg.max_range + 2.0)
+    for p in range(m):  # set-up only
+        noisy = world.landmarks[recent] + sigma * rng.standard_normal((recent.size, 3))
+        store.write(np.full(recent.size, p), slots[recent], mean=noisy)
+    store.refresh_reference(slots[recent])
 
 
 def time_steps(
@@ -109,9 +118,9 @@ def main(argv: list[str]) -> int:
             results["vs_particles"].append(time_steps(m, args.robots, args.landmarks, args.observations, args.steps))
             show(results["vs_particles"][-1])
         results["vs_landmarks"] = []
-        for n in (500, 2000, 5000, 20000):
-            m = 1000 if n <= 5000 else 300
-            results["vs_landmarks"].append(time_steps(m, args.robots, n, args.observations, args.steps))
+        for n in (2000, 20000, 200000):
+            results["vs_landmarks"].append(time_steps(args.particles, args.robots, n, args.observations, args.steps,
+                                                      association=args.association, proposal=args.proposal))
             show(results["vs_landmarks"][-1])
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)

@@ -32,20 +32,20 @@ import numpy as np
 from mrslam_core.configio import ConfigError, from_dict, to_dict
 from mrslam_core.slam.config import FilterConfig
 from mrslam_core.slam.filter import MultiRobotFastSLAM
-from mrslam_core.slam.landmarks import SLOT_IDS, LandmarkStore
+from mrslam_core.slam.landmarks import STATE_ARRAYS, LandmarkStore
 from mrslam_core.slam.models import ObservationModel
 from mrslam_core.slam.tracks import TrackMemory
 
 FORMAT = "mrslam-filter-checkpoint"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
+#: versions this mrslam reads: 1 stored the landmark store's one-level chunk table (regrouped
+#: into nodes on load), 2 its two-level table (:meth:`LandmarkStore.state`)
+READ_VERSIONS = (1, 2)
 
 #: Filter arrays saved as ``filter.<name>``.
 FILTER_ARRAYS = ("poses", "log_w", "score")
-#: Landmark store arrays saved as ``store.<name>``. The chunk pool (``refcount`` and
-#: ``pool_*``) is saved up to its last chunk in use: chunk ids stay the same after a reload, and
-#: free chunks hold nothing that is ever read (a chunk is overwritten whenever it is taken).
-POOL_ARRAYS = ("refcount", "pool_mean", "pool_cov", "pool_exists", "pool_count", "pool_score")
-STORE_ARRAYS = ("table",) + POOL_ARRAYS + ("descriptor", "ref") + SLOT_IDS
+#: Landmark store arrays saved as ``store.<name>`` (pools and nodes up to the last in use).
+STORE_ARRAYS = STATE_ARRAYS
 #: Filter attributes saved or rebuilt one by one. Every other attribute of the filter (its
 #: counters, flags and per-robot arrays) is saved by type (see :func:`_other_state`): scalars in
 #: the header's ``attributes``, arrays as ``attr.<name>``, ``{int: array}`` dicts as
@@ -59,7 +59,7 @@ TRACK_ARRAYS = ("ids", "slots", "last")
 #: Store attributes restored or rebuilt (``_tree``/``_dtree`` and their live lists are caches,
 #: rebuilt lazily from ``ref`` and ``descriptor``).
 STORE_ATTRIBUTES = frozenset(
-    STORE_ARRAYS + ("dim", "chunk", "descriptor_dim", "size", "_tree", "_live", "_dtree", "_dlive")
+    STORE_ARRAYS + ("dim", "chunk", "fanout", "descriptor_dim", "size", "_grid", "_dindex", "_free_nodes", "_free_chunks", "_scratch")
 )
 
 
@@ -98,11 +98,8 @@ def save_checkpoint(filter: MultiRobotFastSLAM, path: str | Path, extra: dict[st
     arrays: dict[str, np.ndarray] = {}
     for name in FILTER_ARRAYS:
         arrays[f"filter.{name}"] = np.asarray(getattr(filter, name))
-    used = np.flatnonzero(store.refcount > 0)
-    pool = int(used[-1]) + 1 if used.size else 0
-    for name in STORE_ARRAYS:
-        value = np.asarray(getattr(store, name))
-        arrays[f"store.{name}"] = value[:pool] if name in POOL_ARRAYS else value
+    for name, value in store.state().items():
+        arrays[f"store.{name}"] = value
     attributes = _other_state(filter, arrays)
     for k, memory in filter.tracks.items():
         for name in TRACK_ARRAYS:
@@ -129,7 +126,7 @@ def save_checkpoint(filter: MultiRobotFastSLAM, path: str | Path, extra: dict[st
         "attributes": attributes,
         "tracks": {str(k): memory.sets for k, memory in filter.tracks.items()},
         "rng": filter.rng.bit_generator.state,
-        "store": {"dim": int(store.dim), "chunk": int(store.chunk),
+        "store": {"dim": int(store.dim), "chunk": int(store.chunk), "fanout": int(store.fanout),
                   "descriptor_dim": int(store.descriptor_dim), "size": int(store.size)},
         "extra": extra_json,
         "extra_arrays": sorted(k[len("extra."):] for k in arrays if k.startswith("extra.")),
@@ -243,9 +240,9 @@ def _header(data, path) -> dict[str, Any]:
         raise CheckpointError(f"{path}: header is not valid JSON: {exc}") from exc
     if not isinstance(header, dict) or header.get("format") != FORMAT:
         raise CheckpointError(f"{path}: not an mrslam filter checkpoint")
-    if header.get("version") != FORMAT_VERSION:
+    if header.get("version") not in READ_VERSIONS:
         raise CheckpointError(
-            f"{path}: checkpoint format version {header.get('version')!r}, this mrslam reads {FORMAT_VERSION}"
+            f"{path}: checkpoint format version {header.get('version')!r}, this mrslam reads {READ_VERSIONS}"
         )
     return header
 
@@ -327,31 +324,12 @@ def _rebuild(path, header, arrays, config, model) -> tuple[MultiRobotFastSLAM, d
 
 
 def _rebuild_store(path, meta: dict[str, Any], arrays: dict[str, np.ndarray], m: int) -> LandmarkStore:
-    dim, chunk = int(meta["dim"]), int(meta["chunk"])
-    store = LandmarkStore(m, dim, int(meta["descriptor_dim"]), 1, chunk)
-    for name in STORE_ARRAYS:
-        if name in ("born", "maker") and f"store.{name}" not in arrays:  # written before landmarks had them
-            setattr(store, name, np.full(store.descriptor.shape[0], -1, np.int64))
-            continue
-        setattr(store, name, np.array(arrays[f"store.{name}"]))
-    store.size = int(meta["size"])
-    pool = store.refcount.shape[0]
-    cap = store.descriptor.shape[0]
-    checks = [
-        (store.table.ndim == 2 and store.table.shape[0] == m, "table rows != particles"),
-        (store.table.size == 0 or (0 <= store.table.min() and store.table.max() < pool), "table names a chunk outside the pool"),
-        (store.table.shape[1] * chunk >= store.size, "fewer chunk columns than slots"),
-        (store.pool_mean.shape == (pool, chunk, dim), "pool_mean shape"),
-        (store.pool_cov.shape == (pool, chunk, dim, dim), "pool_cov shape"),
-        (all(getattr(store, f"pool_{f}").shape == (pool, chunk) for f in ("exists", "count", "score")),
-         "pool exists/count/score shape"),
-        (store.descriptor.shape == (cap, store.descriptor_dim), "descriptor shape"),
-        (store.ref.shape == (cap, dim) and all(getattr(store, a).shape == (cap,) for a in SLOT_IDS),
-         "ref/origin/born/maker shape"),
-        (0 <= store.size <= cap, "size exceeds capacity"),
-        (np.array_equal(np.bincount(store.table.ravel(), minlength=pool), store.refcount), "refcount != table"),
-    ]
-    for ok, what in checks:
-        if not ok:
-            raise CheckpointError(f"{path}: inconsistent landmark store: {what}")
+    state = {name: arrays[f"store.{name}"] for name in STORE_ARRAYS if f"store.{name}" in arrays}
+    try:
+        store = LandmarkStore.from_state(state, int(meta["dim"]), int(meta["chunk"]), int(meta["descriptor_dim"]),
+                                         int(meta["size"]), int(meta.get("fanout", 32)))
+    except ValueError as exc:
+        raise CheckpointError(f"{path}: inconsistent landmark store: {exc}") from exc
+    if store.num_particles != m:
+        raise CheckpointError(f"{path}: inconsistent landmark store: table rows != particles")
     return store

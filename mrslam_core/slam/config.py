@@ -51,7 +51,7 @@ class AssociationConfig:
     duplicate landmark. For descriptors that identify a landmark for certain (barcodes), this is
     association by known correspondence and lets a drifted robot re-localise; for visual
     descriptors keep it off.
-    ``candidate_search``: landmarks near the observation (a kd-tree over positions, for
+    ``candidate_search``: landmarks near the observation (a grid over positions, for
     repetitive visual features) or landmarks whose descriptor is within E0 wherever they are (a
     kd-tree over descriptors, 002 section III; for identifying descriptors such as barcodes).
     ``geometry_weight`` w: the ``ml`` rule picks the gated candidate of least

@@ -706,13 +706,10 @@ class MultiRobotFastSLAM:
         """Existence counters (001 III-F): landmarks in the footprint but not seen lose a point."""
         ex = self.config.existence
         store = self.landmarks
-        tree = store.tree()
-        if tree is None:
-            return
         center = np.zeros(store.dim)
         center[:2] = mean_pose[:2]
         reach = ex.max_range + radius + (3.0 if store.dim == 3 else 0.0)
-        slots = np.sort(store._live[tree.query_ball_point(center, reach)])
+        slots = store.within(center, reach)
         if slots.size == 0:
             return
         m = self.num_particles

@@ -1,27 +1,32 @@
-"""The landmark maps of all particles: slot-indexed, stored in copy-on-write chunks.
+"""The landmark maps of all particles: slot-indexed, stored in a two-level copy-on-write tree.
 
 A landmark created for a given observation gets the SAME slot index in every particle that created
-it, so one spatial index over slots serves all particles. Slots are grouped in chunks of
-``chunk`` consecutive slots. Each particle has a table row naming, per chunk column, the pool chunk
-that holds its values (mean, covariance, existence, counts). Resampling copies the table rows
-(integers), so a duplicated particle starts out sharing its parent's chunks; the first write to a
-shared chunk gives the writer its own copy (copy-on-write). Writing through :meth:`write` is the
-only way values change, so no particle ever sees another particle's update — the no-aliasing
-guarantee a resampled FastSLAM needs — while a resampling step costs O(M × columns) integers
-instead of copying every map (the array form of Montemerlo's log(N) FastSLAM tree sharing).
+it, so one spatial index over slots serves all particles. Slots are grouped in chunks of ``chunk``
+consecutive slots, and chunk columns in nodes of ``fanout`` columns. Each particle has a table row
+naming, per node column, the node that lists its chunks; a chunk holds the values (mean,
+covariance, existence, counts) of its slots. Resampling copies table rows, so a duplicated particle
+starts out sharing its parent's nodes; the first write to a shared node or chunk gives the writer
+its own copy (copy-on-write). Writing through :meth:`write` is the only way values change, so no
+particle ever sees another particle's update — the no-aliasing guarantee a resampled FastSLAM needs
+— while a resampling step costs O(M × N / (chunk × fanout)) integers instead of copying every map
+(the array form of Montemerlo's log(N) FastSLAM tree, with two levels). Nodes and chunks are
+reference-counted and recycled through free lists, so no step scans the pool. Chunk 0 is the
+empty chunk every unwritten column names; it is never written (a write copies it first).
 
 Per slot (shared by all particles, since the creating observation is the same): descriptor and a
-reference position (mean over the particles that hold the slot) for the spatial index.
+reference position (mean over the particles that hold the slot) for the search indexes
+(:mod:`mrslam_core.slam.spatial_index`).
 """
 
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from mrslam_core.arrays import unique_rows
+from mrslam_core.slam.spatial_index import DescriptorIndex, PositionGrid
 
 _FIELDS = ("mean", "cov", "exists", "count", "score")
+_EMPTY = 0  # the pool chunk every unwritten chunk column names (pinned: never freed, never written)
 
 
 def _width(pool: np.ndarray) -> int:
@@ -31,6 +36,26 @@ def _width(pool: np.ndarray) -> int:
 
 #: per-slot int64 arrays of the store (−1: unknown): the creating track id, stamp and robot
 SLOT_IDS = ("origin", "born", "maker")
+#: the arrays that hold the store's state (:meth:`LandmarkStore.state`)
+STATE_ARRAYS = ("table", "nodes", "node_ref", "refcount") + tuple(f"pool_{f}" for f in _FIELDS) + (
+    "descriptor", "ref") + SLOT_IDS
+
+
+class _FreeList:
+    """A stack of free ids (nodes or pool chunks)."""
+
+    def __init__(self) -> None:
+        self.ids = np.zeros(0, np.int64)
+
+    def push(self, ids: np.ndarray) -> None:
+        if ids.size:
+            self.ids = np.concatenate([self.ids, ids.astype(np.int64)])
+
+    def pop(self, n: int) -> np.ndarray:
+        out = self.ids[self.ids.size - n:]
+        self.ids = self.ids[: self.ids.size - n]
+        return out
+
 
 class LandmarkStore:
     """Landmarks of M particles.
@@ -38,7 +63,10 @@ class LandmarkStore:
     Attributes:
         dim: landmark dimension (3 for stereo points, 2 for planar landmarks).
         chunk: slots per chunk.
-        table: (M, columns) int64 pool chunk of each particle's chunk column.
+        fanout: chunk columns per node.
+        table: (M, G) int64 node of each particle's node column.
+        nodes: (Q, fanout) int64 pool chunk of each of a node's chunk columns.
+        node_ref: (Q,) table entries naming each node (0 = free).
         pool_mean: (P, chunk, dim) float32 positions in the map frame [m].
         pool_cov: (P, chunk, dim, dim) float32 covariances [m²]. Stored in single precision
             (half the memory traffic of gathers and copy-on-write); all arithmetic on them is
@@ -46,7 +74,7 @@ class LandmarkStore:
         pool_exists: (P, chunk) bool.
         pool_count: (P, chunk) int32, observations associated (creation included).
         pool_score: (P, chunk) int16, existence counter (001 section III-F).
-        refcount: (P,) particles whose table names each pool chunk (0 = free).
+        refcount: (P,) entries of live nodes naming each pool chunk (0 = free; chunk 0 pinned).
         descriptor: (cap, D) float32 per slot.
         ref: (cap, dim) reference position of each slot for the spatial index [m] (inf: none).
         origin: (cap,) track id of the observation that created each slot (-1: unknown).
@@ -56,13 +84,17 @@ class LandmarkStore:
     """
 
     def __init__(
-        self, num_particles: int, dim: int, descriptor_dim: int = 0, capacity: int = 256, chunk: int = 16
+        self, num_particles: int, dim: int, descriptor_dim: int = 0, capacity: int = 256, chunk: int = 16,
+        fanout: int = 32,
     ):
         self.dim = dim
         self.chunk = chunk
+        self.fanout = fanout
         self.descriptor_dim = descriptor_dim
         self.size = 0
         self.table = np.zeros((num_particles, 0), np.int64)
+        self.nodes = np.zeros((0, fanout), np.int64)
+        self.node_ref = np.zeros(0, np.int64)
         self.refcount = np.zeros(0, np.int64)
         self.pool_mean = np.zeros((0, chunk, dim), np.float32)
         self.pool_cov = np.zeros((0, chunk, dim, dim), np.float32)
@@ -75,11 +107,13 @@ class LandmarkStore:
         self.origin = np.full(cap, -1, np.int64)
         self.born = np.full(cap, -1, np.int64)
         self.maker = np.full(cap, -1, np.int64)
-        self._tree: cKDTree | None = None
-        self._live = np.zeros(0, np.int64)
-        self._dtree: cKDTree | None = None
-        self._dlive = np.zeros(0, np.int64)
+        self._free_chunks = _FreeList()
+        self._free_nodes = _FreeList()
+        self._scratch = np.zeros(0, np.int64)
         self._grow_pool(max(cap // chunk, 1) * 2)
+        self.refcount[_EMPTY] = 1  # the pin
+        self._grow_nodes(max(cap // (chunk * fanout), 1) * 2)
+        self._reset_indexes()
 
     # ------------------------------------------------------------------ sizes
     @property
@@ -88,15 +122,17 @@ class LandmarkStore:
 
     @property
     def columns(self) -> int:
-        return self.table.shape[1]
+        """Chunk columns in use."""
+        return -(-self.size // self.chunk)
 
     def nbytes(self) -> int:
-        """Bytes held by the pool chunks in use, the tables and the per-slot arrays."""
+        """Bytes held by the pool chunks and nodes in use, the table and the per-slot arrays."""
         used = int((self.refcount > 0).sum())
         per_chunk = sum(getattr(self, f"pool_{f}")[0:1].nbytes for f in _FIELDS)
-        return used * per_chunk + self.table.nbytes + self.descriptor.nbytes + self.ref.nbytes
+        nodes = int((self.node_ref > 0).sum()) * self.nodes[0:1].nbytes
+        return used * per_chunk + nodes + self.table.nbytes + self.descriptor.nbytes + self.ref.nbytes
 
-    # ------------------------------------------------------------------ pool management
+    # ------------------------------------------------------------------ pool and node management
     def _grow_pool(self, needed: int) -> None:
         have = self.refcount.size
         if needed <= have:
@@ -110,32 +146,99 @@ class LandmarkStore:
         for f in _FIELDS:
             setattr(self, f"pool_{f}", pad(getattr(self, f"pool_{f}")))
         self.refcount = pad(self.refcount)
+        self._free_chunks.push(np.arange(new - 1, max(have, 1) - 1, -1))  # low ids on top
 
-    def _take_free(self, n: int) -> np.ndarray:
-        free = np.flatnonzero(self.refcount == 0)
-        if free.size < n:
-            self._grow_pool(self.refcount.size + n - free.size)
-            free = np.flatnonzero(self.refcount == 0)
-        return free[:n]
+    def _grow_nodes(self, needed: int) -> None:
+        have = self.node_ref.size
+        if needed <= have:
+            return
+        new = max(needed, 2 * have)
+        self.nodes = np.concatenate([self.nodes, np.zeros((new - have, self.fanout), np.int64)])
+        self.node_ref = np.concatenate([self.node_ref, np.zeros(new - have, np.int64)])
+        self._free_nodes.push(np.arange(new - 1, have - 1, -1))
 
-    def _make_private(self, m: np.ndarray, cols: np.ndarray) -> None:
-        """Give particles ``m`` their own copy of chunk columns ``cols`` where they share it."""
-        cid = self.table[m, cols]
+    def _take_chunks(self, n: int) -> np.ndarray:
+        if self._free_chunks.ids.size < n:
+            self._grow_pool(self.refcount.size + n - self._free_chunks.ids.size)
+        return self._free_chunks.pop(n)
+
+    def _take_nodes(self, n: int) -> np.ndarray:
+        if self._free_nodes.ids.size < n:
+            self._grow_nodes(self.node_ref.size + n - self._free_nodes.ids.size)
+        return self._free_nodes.pop(n)
+
+    def _release_chunks(self, cid: np.ndarray) -> None:
+        """Drop one reference to each entry of ``cid`` (repeats allowed); free those left with none."""
+        if cid.size == 0:
+            return
+        n = np.bincount(cid, minlength=self.refcount.size)  # O(pool), cheaper than sorting many ids
+        self.refcount -= n
+        self._free_chunks.push(np.flatnonzero((n > 0) & (self.refcount == 0)))
+
+    def _release_nodes(self, nid: np.ndarray) -> None:
+        """Drop one table reference to each entry of ``nid`` (repeats allowed); a node left with
+        none is freed and releases its chunks."""
+        if nid.size == 0:
+            return
+        n = np.bincount(nid, minlength=self.node_ref.size)
+        self.node_ref -= n
+        dead = np.flatnonzero((n > 0) & (self.node_ref == 0))
+        if dead.size:
+            self._free_nodes.push(dead)
+            self._release_chunks(self.nodes[dead].ravel())
+
+    def _distinct(self, key: np.ndarray, space: int) -> np.ndarray:
+        """Positions (sorted) of one occurrence of each distinct value of ``key`` (ints in
+        [0, space)), in O(len(key)) with a scratch array instead of a sort."""
+        if self._scratch.size < space:
+            self._scratch = np.full(max(space, 2 * self._scratch.size), -1, np.int64)
+        pos = np.arange(key.size)
+        self._scratch[key] = pos  # one position per value survives
+        first = pos[self._scratch[key] == pos]
+        self._scratch[key] = -1
+        return first
+
+    def _private_nodes(self, m: np.ndarray, g: np.ndarray) -> np.ndarray:
+        """Give particles ``m`` their own copy of node columns ``g`` where they share it; returns
+        the (private) node of each pair."""
+        nid = self.table[m, g]
+        shared = self.node_ref[nid] > 1
+        if not shared.any():
+            return nid
+        ms, gs = m[shared], g[shared]
+        one = self._distinct(ms * self.table.shape[1] + gs, self.table.size)
+        ms, gs, old = ms[one], gs[one], nid[shared][one]
+        new = self._take_nodes(old.size)
+        self.nodes[new] = self.nodes[old]
+        self.node_ref[new] = 1
+        self.table[ms, gs] = new
+        self.refcount += np.bincount(self.nodes[new].ravel(), minlength=self.refcount.size)
+        self._release_nodes(old)  # still referenced elsewhere: nothing is freed
+        return self.table[m, g]
+
+    def _private_chunks(self, nid: np.ndarray, sub: np.ndarray) -> np.ndarray:
+        """Give private nodes ``nid`` their own copy of chunk columns ``sub`` where they share it;
+        returns the (private) pool chunk of each pair."""
+        cid = self.nodes[nid, sub]
         shared = self.refcount[cid] > 1
         if not shared.any():
-            return
-        mask = np.zeros(self.table.size, bool)  # unique (particle, column) keys without sorting
-        mask[m[shared] * self.columns + cols[shared]] = True
-        key = np.flatnonzero(mask)
-        m, cols = key // self.columns, key % self.columns
-        cid = self.table[m, cols]
-        new = self._take_free(cid.size)
+            return cid
+        ns, ss = nid[shared], sub[shared]
+        one = self._distinct(ns * self.fanout + ss, self.nodes.size)
+        ns, ss, old = ns[one], ss[one], cid[shared][one]
+        new = self._take_chunks(old.size)
         for f in _FIELDS:
             arr = getattr(self, f"pool_{f}")
-            arr[new] = np.take(arr, cid, axis=0)
-        self.table[m, cols] = new
+            arr[new] = np.take(arr, old, axis=0)
+        self.nodes[ns, ss] = new
         self.refcount[new] = 1
-        self.refcount -= np.bincount(cid, minlength=self.refcount.size)
+        self._release_chunks(old)
+        return self.nodes[nid, sub]
+
+    def chunk_table(self) -> np.ndarray:
+        """(M, columns) pool chunk of each particle's chunk column (a new array)."""
+        eff = self.nodes[self.table].reshape(self.num_particles, -1)
+        return eff[:, : self.columns]
 
     # ------------------------------------------------------------------ slots
     def allocate(self, n: int, descriptors: np.ndarray | None) -> np.ndarray:
@@ -162,19 +265,24 @@ class LandmarkStore:
                 grown = np.full(cap, -1, np.int64)
                 grown[: old.size] = old
                 setattr(self, name, grown)
-        cols_needed = -(-self.size // self.chunk)
-        if cols_needed > self.columns:
-            add = cols_needed - self.columns
-            fresh = self._take_free(add)  # one empty chunk per new column, shared by all particles
-            for f in _FIELDS:
-                getattr(self, f"pool_{f}")[fresh] = 0
-            self.refcount[fresh] = self.num_particles
+        groups = -(-self.columns // self.fanout)
+        if groups > self.table.shape[1]:
+            add = groups - self.table.shape[1]
+            fresh = self._take_nodes(add)  # one empty node per new node column, shared by all particles
+            self.nodes[fresh] = _EMPTY
+            self.node_ref[fresh] = self.num_particles
+            self.refcount[_EMPTY] += add * self.fanout
             self.table = np.concatenate(
                 [self.table, np.broadcast_to(fresh, (self.num_particles, add))], axis=1
             )
         if descriptors is not None and self.descriptor_dim:
             self.descriptor[slots] = descriptors
         return slots
+
+    def _flat(self, m: np.ndarray, slots: np.ndarray) -> np.ndarray:
+        """Row of (particle, slot) pairs in the pools' (P·chunk, ...) views."""
+        col = slots // self.chunk
+        return self.nodes[self.table[m, col // self.fanout], col % self.fanout] * self.chunk + slots % self.chunk
 
     def gather(self, m: np.ndarray, slots: np.ndarray, fields=("mean", "cov", "exists", "count")):
         """Values of particles ``m`` at ``slots`` (index arrays that broadcast together).
@@ -183,7 +291,7 @@ class LandmarkStore:
             a tuple of copies, one per name in ``fields`` (default: mean (..., dim),
             cov (..., dim, dim), exists (...), count (...)).
         """
-        flat = self.table[m, slots // self.chunk] * self.chunk + slots % self.chunk
+        flat = self._flat(m, slots)
         out = []
         for f in fields:
             arr = getattr(self, f"pool_{f}")
@@ -195,11 +303,11 @@ class LandmarkStore:
     def write(self, m: np.ndarray, slots: np.ndarray, **values: np.ndarray) -> None:
         """Set fields (mean, cov, exists, count, score) of particles ``m`` (P,) at ``slots`` (P,).
 
-        Pairs must be unique. Shared chunks are copied first, so only these particles change.
+        Pairs must be unique. Shared nodes and chunks are copied first, so only these particles change.
         """
-        cols = slots // self.chunk
-        self._make_private(m, cols)
-        flat = self.table[m, cols] * self.chunk + slots % self.chunk
+        col = slots // self.chunk
+        nid = self._private_nodes(m, col // self.fanout)
+        flat = self._private_chunks(nid, col % self.fanout) * self.chunk + slots % self.chunk
         for name, value in values.items():
             arr = getattr(self, f"pool_{name}")
             rows = arr.reshape(arr.shape[0] * arr.shape[1], _width(arr))
@@ -207,8 +315,23 @@ class LandmarkStore:
 
     def exists_dense(self) -> np.ndarray:
         """(M, size) bool: which particle holds which slot."""
-        ex = self.pool_exists[self.table].reshape(self.num_particles, -1)
+        ex = self.pool_exists[self.chunk_table()].reshape(self.num_particles, -1)
         return ex[:, : self.size]
+
+    def held(self) -> np.ndarray:
+        """(size,) bool: the slots some particle holds. Visits each distinct chunk once, not
+        each particle's map (particles share most of their chunks)."""
+        if self.size == 0:
+            return np.zeros(0, bool)
+        g = np.broadcast_to(np.arange(self.table.shape[1]), self.table.shape).ravel()
+        key = np.unique(g * self.node_ref.size + self.table.ravel())  # distinct (column, node)
+        g, nid = key // self.node_ref.size, key % self.node_ref.size
+        col = (g[:, None] * self.fanout + np.arange(self.fanout)).ravel()
+        key = np.unique(col * self.refcount.size + self.nodes[nid].ravel())  # distinct (column, chunk)
+        col, cid = key // self.refcount.size, key % self.refcount.size
+        out = np.zeros((self.table.shape[1] * self.fanout, self.chunk), bool)
+        np.logical_or.at(out, col, self.pool_exists[cid])
+        return out.ravel()[: self.size]
 
     def refresh_reference(self, slots: np.ndarray) -> None:
         """Recompute the reference positions of ``slots`` as the mean over holding particles."""
@@ -221,9 +344,10 @@ class LandmarkStore:
         with np.errstate(invalid="ignore", divide="ignore"):
             ref = total / n[:, None]
         ref[n == 0] = np.inf
-        self.ref[slots] = ref
-        self._tree = None
-        self._dtree = None
+        dropped = np.isfinite(self.ref[slots, 0]) & (n == 0)
+        self._set_ref(slots, ref)
+        if dropped.any():
+            self._dindex.stale = True  # a slot left the live set: the descriptor tree is rebuilt
 
     def set_reference(self, slots: np.ndarray, means: np.ndarray) -> None:
         """Reference positions from values just written: per slot, the mean of ``means`` (P, dim)
@@ -235,9 +359,22 @@ class LandmarkStore:
         n = np.bincount(rel)
         uniq = np.flatnonzero(n)
         ref = np.stack([np.bincount(rel, means[:, d], n.size)[uniq] for d in range(self.dim)], -1)
-        self.ref[uniq + lo] = ref / n[uniq, None]
-        self._tree = None
-        self._dtree = None
+        self._set_ref(uniq + lo, ref / n[uniq, None])
+
+    def _set_ref(self, slots: np.ndarray, ref: np.ndarray) -> None:
+        born = slots[~np.isfinite(self.ref[slots, 0]) & np.isfinite(ref[:, 0])]
+        self.ref[slots] = ref
+        self._dindex.add(born)
+        if self._grid is not None:
+            self._grid.update(slots, ref)
+
+    def _reset_indexes(self) -> None:
+        """Forget the search indexes (rebuilt from ``ref`` and ``descriptor`` when next asked)."""
+        self._grid: PositionGrid | None = None
+        self._dindex = DescriptorIndex()
+
+    def _live(self) -> np.ndarray:
+        return np.flatnonzero(np.isfinite(self.ref[: self.size, 0]))
 
     def descriptor_candidates(self, desc: np.ndarray, k: int, max_sq_dist: float) -> np.ndarray:
         """Up to ``k`` live slots whose descriptor is within squared distance ``max_sq_dist``
@@ -247,26 +384,16 @@ class LandmarkStore:
         Returns:
             (B, k) slot indices, -1 where there are fewer.
         """
-        if self._dtree is None:
-            self._dlive = np.flatnonzero(np.isfinite(self.ref[: self.size, 0]))
-            self._dtree = cKDTree(self.descriptor[self._dlive]) if self._dlive.size else None
-        out = np.full((desc.shape[0], k), -1, np.int64)
-        if self._dtree is None or desc.shape[0] == 0:
-            return out
-        kk = min(k, self._dlive.size)
-        dist, idx = self._dtree.query(desc, k=kk, distance_upper_bound=np.sqrt(max_sq_dist) + 1e-9)
-        if kk == 1:
-            dist, idx = dist[:, None], idx[:, None]
-        ok = np.isfinite(dist)
-        out[:, :kk][ok] = self._dlive[idx[ok]]
-        return out
+        return self._dindex.nearest(self.descriptor, self._live(), desc, k,
+                                    float(np.sqrt(max_sq_dist)) + 1e-9)
 
-    def tree(self) -> cKDTree | None:
-        """A kd-tree over the live slots' reference positions (rebuilt only after changes)."""
-        if self._tree is None:
-            self._live = np.flatnonzero(np.isfinite(self.ref[: self.size, 0]))
-            self._tree = cKDTree(self.ref[self._live]) if self._live.size else None
-        return self._tree
+    def grid(self) -> PositionGrid:
+        """The position index over the live slots' reference positions."""
+        if self._grid is None:
+            self._grid = PositionGrid()
+            live = self._live()
+            self._grid.update(live, self.ref[live])
+        return self._grid
 
     def candidates(self, points: np.ndarray, k: int, radius: float) -> np.ndarray:
         """Up to ``k`` slots whose reference lies within ``radius`` of each point, nearest first.
@@ -277,68 +404,66 @@ class LandmarkStore:
         Returns:
             (B, k) slot indices, -1 where there are fewer candidates.
         """
-        tree = self.tree()
-        out = np.full((points.shape[0], k), -1, np.int64)
-        if tree is None or points.shape[0] == 0:
-            return out
-        kk = min(k, self._live.size)
-        dist, idx = tree.query(points, k=kk, distance_upper_bound=radius)
-        if kk == 1:
-            dist, idx = dist[:, None], idx[:, None]
-        ok = np.isfinite(dist)
-        out[:, :kk][ok] = self._live[idx[ok]]
-        return out
+        return self.grid().nearest(self.ref, points, k, radius)
+
+    def within(self, point: np.ndarray, radius: float) -> np.ndarray:
+        """Sorted live slots whose reference lies within ``radius`` of ``point`` (dim,) [m]."""
+        return self.grid().within(self.ref, point, radius)
 
     # ------------------------------------------------------------------ particles
     def copy_rows(self, dst: np.ndarray, src: np.ndarray) -> None:
         """Particles ``dst`` become copies of particles ``src`` (see resampling.copy_plan).
 
-        Only table rows are copied; the chunks they name are shared until written (see
+        Only table rows are copied; the nodes and chunks they name are shared until written (see
         :meth:`write`), so later updates of one particle never reach another.
         """
         if dst.size == 0:
             return
+        old = self.table[dst].ravel()
         self.table[dst] = self.table[src]
-        self.refcount[:] = np.bincount(self.table.ravel(), minlength=self.refcount.size)
+        self.node_ref += np.bincount(self.table[dst].ravel(), minlength=self.node_ref.size)
+        self._release_nodes(old)
 
     def dead_fraction(self) -> float:
         """Share of the used slots that no particle holds any more."""
         if self.size == 0:
             return 0.0
-        return 1.0 - float(self.exists_dense().any(axis=0).mean())
+        return 1.0 - float(self.held().mean())
 
     def compact(self) -> np.ndarray:
-        """Drop slots no particle holds and renumber the rest densely, keeping chunk sharing.
-
-        Particles whose old chunks feeding a new column are the same share the new chunk.
+        """Drop slots no particle holds and renumber the rest densely, keeping sharing: particles
+        whose old chunks feeding a new chunk column are the same share the new chunk, and
+        particles whose new chunks of a node column are the same share the node.
 
         Returns:
             (size,) map old slot -> new slot, -1 for dropped slots.
         """
-        live = np.flatnonzero(self.exists_dense().any(axis=0))
+        live = np.flatnonzero(self.held())
         remap = np.full(self.size, -1, np.int64)
         remap[live] = np.arange(live.size)
+        old_table = self.chunk_table()
+        old_pool = {f: getattr(self, f"pool_{f}") for f in _FIELDS}
         ncols = -(-live.size // self.chunk)
-        old_pool = {f: getattr(self, f"pool_{f}").copy() for f in _FIELDS}
-        old_table = self.table
-        m_count = self.num_particles
-        new_table = np.zeros((m_count, ncols), np.int64)
-        self.refcount[:] = 0
+        patterns, owners = [], []
         for j in range(ncols):
             src = live[j * self.chunk : (j + 1) * self.chunk]
             src_cols = np.unique(src // self.chunk)
-            patterns, owner = unique_rows(old_table[:, src_cols], return_inverse=True)
-            ids = self._take_free(patterns.shape[0])
+            pat, owner = unique_rows(old_table[:, src_cols], return_inverse=True)
+            patterns.append((src, src_cols, pat))
+            owners.append(owner.ravel())
+        n_chunks = sum(p[2].shape[0] for p in patterns)
+        self._new_pool(n_chunks + 1)
+        chunk_table = np.zeros((self.num_particles, ncols), np.int64)
+        next_id = 1
+        for j, (src, src_cols, pat) in enumerate(patterns):
+            ids = np.arange(next_id, next_id + pat.shape[0])
+            next_id += pat.shape[0]
             off = src % self.chunk
             col_of = np.searchsorted(src_cols, src // self.chunk)
             for f in _FIELDS:
-                dst = getattr(self, f"pool_{f}")
-                vals = old_pool[f][patterns[:, col_of], off[None, :]]
-                dst[ids] = 0
-                dst[ids, : src.size] = vals
-            self.refcount[ids] = np.bincount(owner.ravel(), minlength=ids.size)
-            new_table[:, j] = ids[owner.ravel()]
-        self.table = new_table
+                getattr(self, f"pool_{f}")[ids, : src.size] = old_pool[f][pat[:, col_of], off[None, :]]
+            chunk_table[:, j] = ids[owners[j]]
+        self._build_nodes(chunk_table)
         self.descriptor[: live.size] = self.descriptor[live]
         self.ref[: live.size] = self.ref[live]
         for name in SLOT_IDS:
@@ -346,12 +471,141 @@ class LandmarkStore:
             arr[: live.size] = arr[live]
         self.ref[live.size : self.size] = np.inf
         self.size = live.size
-        self._tree = None
-        self._dtree = None
+        self._reset_indexes()
         return remap
+
+    def _new_pool(self, n: int) -> None:
+        """An empty pool of ``n`` chunks (chunk 0 the empty chunk) and no nodes."""
+        for f in _FIELDS:
+            old = getattr(self, f"pool_{f}")
+            setattr(self, f"pool_{f}", np.zeros((n,) + old.shape[1:], old.dtype))
+        self.refcount = np.zeros(n, np.int64)
+        self.refcount[_EMPTY] = 1
+        self._free_chunks = _FreeList()
+        self.nodes = np.zeros((0, self.fanout), np.int64)
+        self.node_ref = np.zeros(0, np.int64)
+        self._free_nodes = _FreeList()
+
+    def _build_nodes(self, chunk_table: np.ndarray) -> None:
+        """Table, nodes and reference counts from each particle's chunk per column (M, columns),
+        whose ids name chunks of the pool: particles with the same chunks in a node column share
+        its node. Pool chunks no column names go to the free list."""
+        m, ncols = chunk_table.shape
+        groups = -(-ncols // self.fanout)
+        padded = np.zeros((m, groups * self.fanout), np.int64)  # unnamed columns: the empty chunk
+        padded[:, :ncols] = chunk_table
+        rows, owners = [], []
+        for g in range(groups):
+            pat, owner = unique_rows(padded[:, g * self.fanout : (g + 1) * self.fanout], return_inverse=True)
+            rows.append(pat)
+            owners.append(owner.ravel())
+        total = sum(r.shape[0] for r in rows)
+        self.nodes = np.concatenate(rows) if rows else np.zeros((0, self.fanout), np.int64)
+        self.node_ref = np.zeros(total, np.int64)
+        self.table = np.zeros((m, groups), np.int64)
+        first = 0
+        for g, (pat, owner) in enumerate(zip(rows, owners)):
+            self.table[:, g] = first + owner
+            self.node_ref[first : first + pat.shape[0]] = np.bincount(owner, minlength=pat.shape[0])
+            first += pat.shape[0]
+        self.refcount[:] = np.bincount(self.nodes.ravel(), minlength=self.refcount.size)
+        self.refcount[_EMPTY] += 1
+        self._free_nodes = _FreeList()
+        self._free_chunks = _FreeList()
+        self._free_chunks.push(np.flatnonzero(self.refcount == 0)[::-1])
+        self._grow_nodes(max(total, 1) * 2)
+
+    # ------------------------------------------------------------------ state
+    def state(self) -> dict[str, np.ndarray]:
+        """The arrays that make up the store (for a checkpoint), pools and nodes up to the last in
+        use: ids stay the same after :meth:`from_state`, and free entries hold nothing ever read."""
+        pool = int(np.flatnonzero(self.refcount > 0)[-1]) + 1
+        used_nodes = np.flatnonzero(self.node_ref > 0)
+        q = int(used_nodes[-1]) + 1 if used_nodes.size else 0
+        cut = {"refcount": pool, "nodes": q, "node_ref": q} | {f"pool_{f}": pool for f in _FIELDS}
+        return {name: getattr(self, name)[: cut[name]] if name in cut else getattr(self, name)
+                for name in STATE_ARRAYS}
+
+    @classmethod
+    def from_state(cls, arrays: dict[str, np.ndarray], dim: int, chunk: int, descriptor_dim: int,
+                   size: int, fanout: int = 32) -> LandmarkStore:
+        """The store :meth:`state` saved. A state without ``nodes`` is the one-level layout (a
+        table of pool chunks per chunk column, written before nodes existed): it is regrouped.
+
+        Raises:
+            ValueError: arrays that do not make a consistent store (the message says what).
+        """
+        m = np.asarray(arrays["table"]).shape[0]
+        store = cls(m, dim, descriptor_dim, 1, chunk, fanout)
+        for name in STATE_ARRAYS:
+            if name in arrays:
+                setattr(store, name, np.array(arrays[name]))
+            elif name in SLOT_IDS:  # written before landmarks had them
+                setattr(store, name, np.full(store.descriptor.shape[0], -1, np.int64))
+        store.size = int(size)
+        if "nodes" not in arrays:
+            one_level = np.array(arrays["table"], np.int64)
+            problems = [] if one_level.size == 0 or (0 <= one_level.min() and one_level.max() < store.refcount.size) \
+                else ["table names a chunk outside the pool"]
+            if problems:
+                raise ValueError(problems[0])
+            # make room for the empty chunk at 0: shift every id by one
+            for f in _FIELDS:
+                old = getattr(store, f"pool_{f}")
+                setattr(store, f"pool_{f}", np.concatenate([np.zeros((1,) + old.shape[1:], old.dtype), old]))
+            store.refcount = np.zeros(store.pool_mean.shape[0], np.int64)
+            store._build_nodes(one_level + 1)
+        else:
+            store._free_nodes = _FreeList()
+            store._free_nodes.push(np.flatnonzero(store.node_ref == 0)[::-1])
+            store._free_chunks = _FreeList()
+            free = np.flatnonzero(store.refcount == 0)
+            store._free_chunks.push(free[::-1])
+        problems = store.check()
+        if problems:
+            raise ValueError("; ".join(problems))
+        store._reset_indexes()
+        return store
+
+    def check(self) -> list[str]:
+        """What is inconsistent in the store's arrays (empty: nothing)."""
+        m, dim, chunk = self.num_particles, self.dim, self.chunk
+        pool, q, cap = self.refcount.shape[0], self.node_ref.shape[0], self.descriptor.shape[0]
+        live = self.node_ref > 0
+        if self.nodes.shape != (q, self.fanout):
+            return ["nodes shape"]
+        checks = [
+            (self.table.ndim == 2 and self.table.shape[1] * self.fanout * chunk >= self.size,
+             "fewer node columns than slots"),
+            (self.table.size == 0 or (0 <= self.table.min() and self.table.max() < q), "table names a node outside the nodes"),
+            (self.nodes.shape == (q, self.fanout), "nodes shape"),
+            (not live.any() or (0 <= self.nodes[live].min() and self.nodes[live].max() < pool),
+             "a node names a chunk outside the pool"),
+            (self.pool_mean.shape == (pool, chunk, dim), "pool_mean shape"),
+            (self.pool_cov.shape == (pool, chunk, dim, dim), "pool_cov shape"),
+            (all(getattr(self, f"pool_{f}").shape == (pool, chunk) for f in ("exists", "count", "score")),
+             "pool exists/count/score shape"),
+            (self.descriptor.shape == (cap, self.descriptor_dim), "descriptor shape"),
+            (self.ref.shape == (cap, dim) and all(getattr(self, a).shape == (cap,) for a in SLOT_IDS),
+             "ref/origin/born/maker shape"),
+            (0 <= self.size <= cap, "size exceeds capacity"),
+        ]
+        problems = [what for ok, what in checks if not ok]
+        if problems:
+            return problems
+        if not np.array_equal(np.bincount(self.table.ravel(), minlength=q), self.node_ref):
+            problems.append("node_ref != table")
+        counted = np.bincount(self.nodes[live].ravel(), minlength=pool)
+        counted[_EMPTY] += 1
+        if not np.array_equal(counted, self.refcount):
+            problems.append("refcount != nodes")
+        if pool and (self.pool_exists[_EMPTY].any() or self.pool_count[_EMPTY].any()):
+            problems.append("the empty chunk holds values")
+        return problems
 
     def particle_map(self, m: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Landmarks of particle ``m``: (slots (N,), means (N, dim), covs (N, dim, dim), desc (N, D))."""
-        slots = np.flatnonzero(self.exists_dense()[m])
+        cids = self.nodes[self.table[m]].ravel()[: self.columns]
+        slots = np.flatnonzero(self.pool_exists[cids].ravel()[: self.size])
         mean, cov, _, _ = self.gather(np.full(slots.size, m), slots)
         return slots, mean, cov, self.descriptor[slots].copy()
