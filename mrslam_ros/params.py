@@ -107,9 +107,16 @@ def unknown_overrides(node: Node) -> list[str]:
     overrides a node never declares."""
     overrides = getattr(node, "_parameter_overrides", {})  # rclpy keeps them until declared
     declared = list(node.list_parameters([], 0).names)
-    sections = {name.split(".", 1)[0] for name in declared if "." in name}
-    return sorted(k for k in overrides if not node.has_parameter(k) and not k.startswith(ROS_OWN)
-                  and (k.split(".", 1)[0] in sections or difflib.get_close_matches(k, declared, n=1)))
+    sections = sorted({name.split(".", 1)[0] for name in declared if "." in name})
+    top = [name for name in declared if "." not in name]
+
+    def meant(key: str) -> bool:
+        if "." in key:  # its section is this node's, or a misspelling of one (fliter -> filter)
+            section = key.split(".", 1)[0]
+            return section in sections or bool(difflib.get_close_matches(section, sections, n=1, cutoff=0.8))
+        return bool(difflib.get_close_matches(key, top, n=1))  # robts -> robots
+
+    return sorted(k for k in overrides if not node.has_parameter(k) and not k.startswith(ROS_OWN) and meant(k))
 
 
 def read_config(node: Node, cls: type[T], prefix: str = "", strict: bool = False) -> T:

@@ -10,6 +10,7 @@ usual run folder (report.json, TUM files, plots, config.yaml).
 from __future__ import annotations
 
 import argparse
+import functools
 import sys
 import time
 from dataclasses import dataclass, field, replace
@@ -17,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mrslam_core.configio import ConfigError, load_yaml
+from mrslam_core.configio import ConfigError, load_profile, load_yaml
 from mrslam_core.evaluation.report import write_run
 from mrslam_core.exploration.config import ExplorationConfig, GridConfig
 from mrslam_core.exploration.coverage import explored_fraction
@@ -31,84 +32,24 @@ from mrslam_core.geometry.se2 import between
 from mrslam_core.pipelines.central import CentralConfig, CentralMapper, MapCheckConfig
 from mrslam_core.sim.config import SimConfig
 from mrslam_core.sim.simulation import Simulation
-from mrslam_core.slam.config import AssociationConfig, FilterConfig, MotionConfig
+from mrslam_core.slam.config import FilterConfig
 
 
-def _team_filter() -> FilterConfig:
-    # The motion model matches the simulator's default odometry errors (002 Table I): variance
-    # 1.25e-3 m²/m per translation component, 5.5e-3 rad²/m and 1.7e-3 rad²/rad of heading;
-    # alpha2 covers the heading drift of the wheel-scale difference (0.03 rad/m), var_theta_per_rad
-    # the track error. alpha1 = 0: Thrun's alpha1·rot1² gave a robot that moved a few mm sideways
-    # (rot1 near ±π/2) 0.2 rad of heading noise in one step, and the joint resampling then walked
-    # its heading several degrees while it saw nothing (replays of recorded runs, docs/results.md).
-    # E0 = 0.25 instead of 0.5: measured against the rendered truth, 14 % of the associations
-    # joined points more than 0.3 m apart with E0 = 0.5 (U-SURF look-alikes on the textures),
-    # 6-7 % with 0.25.
-    # outlier_gate = chi2(3 dof, 0.99): a look-alike that passes the association gate only because
-    # the pose is uncertain is left out of the pose proposal and the map. On recorded live demo
-    # runs (4 bags x 8 filter seeds, docs/results.md) robots above 0.15 m went from
-    # 43 to 15 of 96; in closed loop (mrslam team, 16 seeds) 16 to 15 of 48.
-    # track_gate 30 (chi2(3 dof) at 1 - 1e-6): a frontend track keeps its landmark through an
-    # odometry step 3-4 sigma off, where every point of the set fell outside D0 and the set was
-    # mapped again at the wrong heading (recorded demo d1, robot1 at 2.3 s: 0 of 12 points
-    # associated, heading -4 deg in one step). Closed loop, seeds 0-8: robots above 0.10 m
-    # 2 -> 0 of 27; the d1 recording over filter seeds 0-9: target met 0 -> 3 of 10
-    # (docs/results.md).
-    return FilterConfig(
-        num_particles=300,
-        proposal="fastslam2",
-        motion=MotionConfig(alpha1=0.0, alpha2=0.001, alpha3=0.001, alpha4=0.0, min_translation=0.005,
-                            var_xy_per_m=1.25e-3, var_theta_per_m=5.5e-3, var_theta_per_rad=1.75e-3),
-        association=AssociationConfig(descriptor_gate=0.25, outlier_gate=11.34, track_gate=30.0),
-    )
+#: the simulated team profile: TeamConfig's frontend, filter and exploration defaults
+PROFILE = Path(__file__).resolve().parents[2] / "config" / "sim_team.yaml"
 
 
-def _team_exploration() -> ExplorationConfig:
-    # Slower than the 2D exploration defaults, for the 5 Hz stereo frontend (measured on the
-    # office world, docs/results.md): turning at 1.2 rad/s moves the image 55 px per frame and
-    # tracks rarely live the 3 frames an observation needs, and robots that graze obstacles see
-    # nothing (the camera's near limit was f·b/max_disparity = 0.43 m, now 0.21 m); such gaps let the particle
-    # cloud spread and re-acquire a wrong heading. 0.5 rad/s (23 px per frame), 0.35 m/s and
-    # 0.4 m clearance halved the frames without observations (7 % -> 3 %).
-    # start_delay 1 s: the robots stand at their known start poses until their first landmarks
-    # are mapped (points are published from the 3rd frame, 0.4 s). Driving off at once, the team's
-    # first landmarks were mapped from particles already spread by 0.1-0.2 m of odometry, and the
-    # heading they fixed for everything mapped later was off by 0.36 deg (median of 27 robots, 9
-    # above 0.5 deg); standing, 0.12 deg (none above 0.5). Closed loop, seeds 0-8: target met in
-    # 3 -> 7 of 9 runs (docs/results.md).
-    # keep_arc: the follower slows down to drive the pure-pursuit arc instead of swinging wide.
-    # Closed loop, fresh seeds 14-22 (docs/results.md): target met 7 -> 9 of 9 runs,
-    # robots above 0.10 m 2 -> 0 of 27, explored 53 -> 64 %. (Before robots left teammates out
-    # of the grid and recovered when boxed in, it cost exploration: a wedge.)
-    # open_side_turns: 10 of the 11 blind spells (fewer than 3 points a set for 0.8 s or more)
-    # of recorded demos d1 and d3 were turns of 29-212 deg with the camera 0.06-0.14 m from a
-    # wall; in the two traced, the robot came out of the turn 3-7 deg off. With keep_arc and the
-    # map check's gain gate (same seeds): met 9 of 9, summed ATE 0.122 -> 0.114 m, explored
-    # 64 -> 58 %. Without it (keep_arc and the map check only): met 9 of 9, 0.123 m, 65 %: it costs
-    # exploration for an accuracy gain within the noise of 9 seeds (docs/results.md).
-    # turn_clearance 0.6 m: before a turn on the spot whose headings pass nearer than 0.6 m to an
-    # occupied cell, the robot backs straight away (up to 0.4 m, where the space behind is free);
-    # the cameras sit 0.12 m ahead of the axle and see nothing nearer than 0.21 m. Closed loop
-    # (docs/results.md), seeds 14-27: robots above 0.10 m 2 -> 0 of 42, and the two
-    # runs it missed were robots wedged (a turn on the spot against a door jamb, three robots
-    # turning into each other), which the reversal of blocked turns (turn_stall_time, on by
-    # default) frees; with both, fresh seeds 28-39: met 8 -> 9 of 12, robots above 0.10 m
-    # 5 -> 2 of 36.
-    # max_turn_rate 0.35 rad/s (16 px per frame): fresh seeds 28-39, met 10 -> 11 of 12, robots
-    # above 0.10 m 1 -> 0 of 36, summed ATE 0.156 -> 0.108 m, explored 62 -> 60 % (the miss: a
-    # robot at 0.029 m, 32 % of its odometry's 0.09 m); docs/results.md.
-    return ExplorationConfig(max_speed=0.35, max_turn_rate=0.35, robot_radius=0.4, start_delay=1.0, keep_arc=True,
-                             open_side_turns=True, turn_clearance=0.6)
+@dataclass(frozen=True)
+class _Profile:
+    frontend: FrontendConfig = field(default_factory=FrontendConfig)
+    filter: FilterConfig = field(default_factory=FilterConfig)
+    exploration: ExplorationConfig = field(default_factory=ExplorationConfig)
 
 
-def _team_frontend() -> FrontendConfig:
-    # Renderings have exact calibration. Measured on the office renderings against the depth
-    # buffer: disparity error σ 0.24 px (MAD) to 0.36 px (std) on smooth surfaces; Harris corners
-    # sit on whole pixels (±0.5 px). σd = 0.5 px and σr = σc = 1 px keep a margin (000 uses
-    # 1 and 10 px for a real head with calibration error).
-    # max_disparity 128 puts the near limit f·b/d at 0.21 m (64: 0.43 m): a robot facing a wall
-    # at the planner's 0.4 m clearance has its cameras 0.28 m from it and saw nothing with 64.
-    return FrontendConfig(sigma_d=0.5, sigma_r=1.0, sigma_c=1.0, max_disparity=128)
+@functools.lru_cache(maxsize=1)
+def team_profile() -> _Profile:
+    """The sections of config/sim_team.yaml (read once)."""
+    return load_profile(_Profile, PROFILE)
 
 
 @dataclass(frozen=True)
@@ -122,6 +63,8 @@ class TeamConfig:
         explore: send the robots to frontiers (else they stand still).
         map_check: the central mapper's check of each robot against the older map (also the
             demo's central node's).
+        frontend, filter, exploration: by default the simulated team profile
+            (config/sim_team.yaml).
     """
 
     robots: int = 3
@@ -129,10 +72,10 @@ class TeamConfig:
     control_period: float = 0.2
     explore: bool = True
     sim: SimConfig = field(default_factory=SimConfig)
-    frontend: FrontendConfig = field(default_factory=_team_frontend)
-    filter: FilterConfig = field(default_factory=_team_filter)
+    frontend: FrontendConfig = field(default_factory=lambda: team_profile().frontend)
+    filter: FilterConfig = field(default_factory=lambda: team_profile().filter)
     map_check: MapCheckConfig = field(default_factory=MapCheckConfig)
-    exploration: ExplorationConfig = field(default_factory=_team_exploration)
+    exploration: ExplorationConfig = field(default_factory=lambda: team_profile().exploration)
     grid: GridConfig = field(default_factory=GridConfig)
 
 

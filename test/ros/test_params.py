@@ -46,7 +46,11 @@ def test_params_file_with_nested_keys_ints_for_floats_and_typos(tmp_path):
     path = tmp_path / "p.yaml"
     path.write_text(yaml.safe_dump({"/**": {"ros__parameters": params}}))
     typo = tmp_path / "typo.yaml"
-    typo.write_text(yaml.safe_dump({"/**": {"ros__parameters": {"filter": {"num_particle": 5}}}}))
+    # a misspelled key and section are this node's mistakes; another node's section of a shared
+    # profile (a frontend's, whose key looks like one of the filter's) is not
+    typo.write_text(yaml.safe_dump({"/**": {"ros__parameters": {
+        "filter": {"num_particle": 5}, "fliter": {"seed": 3},
+        "frontend": {"track_descriptor_gate": 0.2, "max_disparity": 128}}}}))
     rclpy.init()
     try:
         node = rclpy.create_node("params_file_test", cli_args=["--ros-args", "--params-file", str(path)])
@@ -59,7 +63,7 @@ def test_params_file_with_nested_keys_ints_for_floats_and_typos(tmp_path):
         node.destroy_node()
         node = rclpy.create_node("params_typo_test", cli_args=["--ros-args", "--params-file", str(typo)])
         declare_config(node, default)
-        assert unknown_overrides(node) == ["filter.num_particle"]
+        assert unknown_overrides(node) == ["filter.num_particle", "fliter.seed"]
         with pytest.raises(ConfigError, match="did you mean filter.num_particles"):
             read_config(node, MrclamConfig, strict=True)
         assert read_config(node, MrclamConfig).filter.num_particles == default.filter.num_particles  # warned only
