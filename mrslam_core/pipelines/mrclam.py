@@ -10,6 +10,7 @@ every robot's pose). Start poses come from ground truth at the first common time
 from __future__ import annotations
 
 import argparse
+import functools
 import sys
 import time
 from dataclasses import dataclass, field, replace
@@ -18,44 +19,27 @@ from typing import Literal
 
 import numpy as np
 
-from mrslam_core.configio import ConfigError, load_yaml
+from mrslam_core.configio import ConfigError, load_profile, load_yaml
 from mrslam_core.datasets.mrclam import MrclamDataset, OdometryIntegrator
 from mrslam_core.evaluation.report import write_run
-from mrslam_core.slam.config import (
-    AssociationConfig,
-    FilterConfig,
-    MotionConfig,
-    RelocalizationConfig,
-)
+from mrslam_core.slam.config import FilterConfig
 from mrslam_core.slam.filter import MultiRobotFastSLAM, RobotUpdate
 from mrslam_core.types import ObservationSet, RobotSighting
 
 
-def _mrclam_filter() -> FilterConfig:
-    # Odometry error measured on dataset 6 against Vicon, all robots: heading σ 0.041 rad over
-    # 1 s, 0.076 over 5 s, 0.16 over 20 s (a random walk of about 0.03 rad/√s on top of errors
-    # proportional to the motion); translation σ about 10–20 % of the distance. Robot 4 sees no
-    # landmark from 240 s to 340 s: its motion noise is deferred while nothing measures it (so
-    # the other robots' weights cannot select its random heading noise), and when it comes back
-    # with its observations improbable in every particle it is re-localised from its drift
-    # covariance (docs/results.md, MR.CLAM). Random walks 0.02 m/√s and 0.04 rad/√s: the filter
-    # keeps a position spread comparable to its real error (with 0.005 m/√s the particles of a
-    # robot sat within 0.01–0.03 m of each other while 0.2–0.5 m from Vicon).
-    return FilterConfig(
-        num_particles=500,
-        proposal="fastslam2",
-        observation_model="range_bearing",
-        motion=MotionConfig(
-            alpha1=0.1, alpha2=0.1, alpha3=0.01, alpha4=0.001, sigma_xy_rw=0.02, sigma_theta_rw=0.04
-        ),
-        association=AssociationConfig(
-            mahalanobis_gate=13.8, descriptor_gate=0.5, candidate_search="descriptor",
-            descriptor_trust_gate=1e4,
-        ),
-        sighting_outlier_probability=0.05,
-        relocalization=RelocalizationConfig(enabled=True),
-        defer_motion_noise=True,
-    )
+#: the MR.CLAM profile: MrclamConfig's filter default
+PROFILE = Path(__file__).resolve().parents[2] / "config" / "mrclam.yaml"
+
+
+@dataclass(frozen=True)
+class _Profile:
+    filter: FilterConfig = field(default_factory=FilterConfig)
+
+
+@functools.lru_cache(maxsize=1)
+def mrclam_profile() -> _Profile:
+    """The ``filter`` section of config/mrclam.yaml (read once)."""
+    return load_profile(_Profile, PROFILE)
 
 
 @dataclass(frozen=True)
@@ -63,7 +47,8 @@ class MrclamConfig:
     """The MR.CLAM run.
 
     Attributes:
-        filter: the filter (range-bearing model).
+        filter: the filter (range-bearing model); by default the MR.CLAM profile
+            (config/mrclam.yaml).
         sigma_range, sigma_bearing: landmark measurement noise [m], [rad] (dataset 6 against
             Vicon: 0.12–0.19 m, 0.009–0.019 rad).
         sigma_sighting_range, sigma_sighting_bearing: noise of robot-to-robot measurements
@@ -79,7 +64,7 @@ class MrclamConfig:
             increments against Vicon: 0.041 rad undelayed, 0.026 rad delayed).
     """
 
-    filter: FilterConfig = field(default_factory=_mrclam_filter)
+    filter: FilterConfig = field(default_factory=lambda: mrclam_profile().filter)
     sigma_range: float = 0.15
     sigma_bearing: float = 0.02
     sigma_sighting_range: float = 0.25
