@@ -16,10 +16,12 @@ from typing import Any, TypeVar
 
 import yaml
 
+from mrslam_core.errors import InputError
+
 T = TypeVar("T")
 
 
-class ConfigError(ValueError):
+class ConfigError(InputError, ValueError):
     """A config file or mapping does not fit the config dataclasses."""
 
 
@@ -224,3 +226,16 @@ def unflatten(flat: dict[str, Any]) -> dict[str, Any]:
             node = node.setdefault(part, {})
         node[parts[-1]] = value
     return out
+
+
+def positive_int(text: str) -> int:
+    """An argparse type: an integer >= 1 (a team size, a count)."""
+    import argparse
+
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be at least 1, got {value}")
+    return value

@@ -29,12 +29,14 @@ from typing import Any
 
 import numpy as np
 
+from mrslam_core.errors import InputError
+
 MAP_FORMAT = "mrslam-landmark-map"
 MAP_VERSION = 1
 FORMATS = (".npz", ".ply", ".csv")
 
 
-class MapFileError(ValueError):
+class MapFileError(InputError, ValueError):
     """A map or checkpoint file that cannot be read or written."""
 
 
@@ -341,5 +343,5 @@ def main(argv: list[str]) -> int:
             print(summary(load_map(args.file)))
     except (MapFileError, OSError) as exc:
         print(f"mrslam map: {exc}", file=sys.stderr)
-        return 1
+        return 2
     return 0

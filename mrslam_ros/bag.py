@@ -28,11 +28,13 @@ from typing import Any, Self
 
 from rosbags.rosbag2 import Reader, ReaderError, StoragePlugin, Writer, WriterError
 
+from mrslam_core.errors import InputError
+
 STORAGES = {"sqlite3": StoragePlugin.SQLITE3, "mcap": StoragePlugin.MCAP}
 DEFAULT_EXCLUDE = ("/rosout", "/parameter_events")
 
 
-class BagError(RuntimeError):
+class BagError(InputError, RuntimeError):
     """A bag that cannot be written or read, or a message type that cannot be handled."""
 
 

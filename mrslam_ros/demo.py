@@ -28,7 +28,7 @@ from typing import Literal
 
 import numpy as np
 
-from mrslam_core.configio import ConfigError, load_yaml, to_dict, write_yaml
+from mrslam_core.configio import ConfigError, load_yaml, positive_int, to_dict, write_yaml
 from mrslam_core.pipelines.team import TeamConfig
 
 RECORDED = ("odom", "ground_truth", "observations", "scan", "pose", "cmd_vel", "goal",
@@ -264,7 +264,7 @@ def main(argv: list[str]) -> int:
     ap = argparse.ArgumentParser(prog="mrslam demo", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--config", help="YAML with DemoConfig keys (team: TeamConfig keys)")
-    ap.add_argument("--robots", type=int, help="team size")
+    ap.add_argument("--robots", type=positive_int, help="team size")
     ap.add_argument("--seconds", type=float, help="simulated duration [s]")
     ap.add_argument("--world", help="simulated world (office, small)")
     ap.add_argument("--rtf", type=float, help="real-time factor of the simulator")

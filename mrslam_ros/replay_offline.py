@@ -143,13 +143,12 @@ def main(argv: list[str]) -> int:
     from mrslam_ros.slam_node import SlamNodeConfig
 
     bag = Path(args.bag)
+    bag_info(bag)  # BagError (one line) for a path that is not a bag, before looking beside it
     config = Path(args.config) if args.config else bag.resolve().parent / "slam.yaml"
     out = Path(args.out) if args.out else bag.with_name(bag.name + "_offline")
-    try:
-        cfg = load_yaml(SlamNodeConfig, config)
-    except (ConfigError, OSError) as exc:
-        print(f"mrslam replay --offline: {config}: {exc}", file=sys.stderr)
-        return 2
+    if not config.is_file():
+        raise ConfigError(f"{config}: no such file (the central node's parameters; --config names them)")
+    cfg = load_yaml(SlamNodeConfig, config)
     if args.seed is not None:
         cfg = dataclasses.replace(cfg, filter=dataclasses.replace(cfg.filter, seed=args.seed))
     downtime = None

@@ -15,11 +15,12 @@ from pathlib import Path
 
 import numpy as np
 
+from mrslam_core.errors import InputError
 from mrslam_core.geometry.se2 import between, compose, wrap_angle
 from mrslam_core.evaluation.metrics import interpolate_poses
 
 
-class DatasetError(ValueError):
+class DatasetError(InputError, ValueError):
     """A dataset folder is missing files or holds malformed data."""
 
 

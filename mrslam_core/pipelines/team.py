@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mrslam_core.configio import ConfigError, load_profile, load_yaml
+from mrslam_core.configio import ConfigError, load_profile, load_yaml, positive_int
 from mrslam_core.evaluation.report import write_run
 from mrslam_core.exploration.config import ExplorationConfig, GridConfig
 from mrslam_core.exploration.coverage import explored_fraction
@@ -77,6 +77,10 @@ class TeamConfig:
     map_check: MapCheckConfig = field(default_factory=MapCheckConfig)
     exploration: ExplorationConfig = field(default_factory=lambda: team_profile().exploration)
     grid: GridConfig = field(default_factory=GridConfig)
+
+    def __post_init__(self) -> None:
+        if self.robots < 1 or not self.seconds > 0 or not self.control_period > 0:
+            raise ValueError("need robots >= 1, seconds > 0 and control_period > 0")
 
 
 def run(cfg: TeamConfig, progress: bool = False) -> dict:
@@ -167,7 +171,7 @@ def _odom_in_map(start: np.ndarray, odom0: np.ndarray, odom: np.ndarray) -> np.n
 def main(argv: list[str]) -> int:
     ap = argparse.ArgumentParser(prog="mrslam team", description=__doc__)
     ap.add_argument("--config", help="YAML with TeamConfig keys")
-    ap.add_argument("--robots", type=int)
+    ap.add_argument("--robots", type=positive_int, help="team size")
     ap.add_argument("--seconds", type=float)
     ap.add_argument("--out", default="runs/team")
     args = ap.parse_args(argv)

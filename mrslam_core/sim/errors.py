@@ -1,5 +1,7 @@
 """Errors of the simulator package."""
 
+from mrslam_core.errors import InputError
 
-class SimError(ValueError):
+
+class SimError(InputError, ValueError):
     """A world file, robot name, command or configuration the simulator cannot use."""

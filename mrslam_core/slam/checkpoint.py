@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from mrslam_core.configio import ConfigError, from_dict, to_dict
+from mrslam_core.errors import InputError
 from mrslam_core.slam.config import FilterConfig
 from mrslam_core.slam.filter import MultiRobotFastSLAM
 from mrslam_core.slam.landmarks import STATE_ARRAYS, LandmarkStore
@@ -63,7 +64,7 @@ STORE_ATTRIBUTES = frozenset(
 )
 
 
-class CheckpointError(ValueError):
+class CheckpointError(InputError, ValueError):
     """A checkpoint file that cannot be written or read (wrong format, version or content)."""
 
 
