@@ -169,7 +169,8 @@ def run_main(argv: list[str]) -> int:
                        extra={"dataset": {"format": seq.format, "path": str(args.path), "name": seq.name,
                                           "frames": len(seq), "notes": list(seq.notes)},
                               "frontend": res["robots"], "frontend_ms_mean": res["frontend_ms_mean"],
-                              "dropped": res["dropped"], "merges": res["merges"], "wall_s": res["wall_s"],
+                              "dropped": res["dropped"], "merges": res["merges"], "relocalizations": res["relocalizations"],
+                              "wall_s": res["wall_s"],
                               "start_poses": res["start_poses"]})
     for name, r in report["robots"].items():
         f = res["robots"].get(name, {})

@@ -254,7 +254,7 @@ def write_report(cfg: DemoConfig, out: Path, facts: dict, extra: dict | None = N
             "latency_ms": slam_stats.get("latency_ms"),
             "diagnostics": diagnostics(bag), "updates": slam_stats.get("updates", {}),
             "outlier_matches": slam_stats.get("outlier_matches"), "map_checks": slam_stats.get("map_checks"),
-            "relocalizations": slam_stats.get("relocalizations")}
+            "relocalizations": slam_stats.get("relocalizations"), "merges": slam_stats.get("merges")}
     info.update(extra or {})
     return write_run(out, trajectories, cfg, np.asarray(slam_stats.get("update_ms_all", []), float), landmarks,
                      extra=info, occupancy=occupancy)
@@ -305,8 +305,10 @@ def main(argv: list[str]) -> int:
             print(f"  {name}: ATE {r['ate_rmse_m']:.3f} m (odometry {r['odom_ate_rmse_m']:.3f} m), "
                   f"RPE {r['rpe_rmse_m']:.3f} m, {r['poses']} poses")
     u = report["update_ms"]
-    print(f"  landmarks {report['landmarks']}; explored {report['explored_fraction']}; central step p50 "
-          f"{u['p50']:.1f} p95 {u['p95']:.1f} max {u['max']:.1f} ms; drops {report['dropped']}; "
+    explored = report["explored_fraction"]
+    drops = ", ".join(f"{k} {v}" for k, v in sorted(report["dropped"].items()) if v) or "none"
+    print(f"  landmarks {report['landmarks']}; explored {'n/a' if explored is None else f'{explored:.0%}'}; "
+          f"central step p50 {u['p50']:.1f} p95 {u['p95']:.1f} max {u['max']:.1f} ms; drops: {drops}; "
           f"wall {res['wall_s']:.0f} s")
     print(f"report: {out / 'report.json'}")
     return 1 if res["failed"] else 0

@@ -41,6 +41,17 @@ def robot_metrics(tr: dict) -> dict[str, float]:
     return out
 
 
+def corrections(report: dict) -> dict[str, list[tuple[float, str]]]:
+    """robot -> [(time [s], cause)] of the accepted pose corrections a report lists: its
+    ``relocalizations`` (after a gap, by the map check) and its accepted ``merges``."""
+    out: dict[str, list[tuple[float, str]]] = {}
+    entries = list(report.get("relocalizations") or []) + [dict(m, cause="merge") for m in report.get("merges") or []]
+    for e in entries:
+        if isinstance(e, dict) and e.get("accepted") and "robot" in e and "stamp_ns" in e:
+            out.setdefault(str(e["robot"]), []).append((int(e["stamp_ns"]) * 1e-9, str(e.get("cause", ""))))
+    return {r: sorted(v) for r, v in out.items()}
+
+
 def write_run(
     out: str | Path,
     trajectories: dict[str, dict],
@@ -85,7 +96,8 @@ def write_run(
                       occupancy["resolution"], **thresholds)
         report["occupancy_map"] = "occupancy.yaml"
     if plots:
-        report["plots"] = [p.name for p in plot_run(out, trajectories, landmarks, truth_landmarks, occupancy)]
+        report["plots"] = [p.name for p in plot_run(out, trajectories, landmarks, truth_landmarks, occupancy,
+                                                     corrections(report))]
     write_yaml(config, out / "config.yaml")
     (out / "report.json").write_text(json.dumps(report, indent=2, default=float))
     return report

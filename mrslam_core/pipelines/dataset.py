@@ -170,6 +170,7 @@ def run(sequence: StereoSequence, cfg: DatasetRunConfig, progress=None) -> dict:
     return {
         "trajectories": trajectories, "update_ms": np.array(mapper.update_ms), "landmarks": {"mean": mean, "cov": cov},
         "robots": vo_figures, "dropped": mapper.counters(), "merges": mapper.merges,
+        "relocalizations": mapper.relocalizations,
         "frontend_ms_mean": 1e3 * frontend_s / max(frames, 1), "wall_s": time.perf_counter() - wall,
         "start_poses": {n: starts[j].tolist() for j, n in enumerate(names)},
     }

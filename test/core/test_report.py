@@ -99,3 +99,45 @@ def test_the_occupancy_grid_is_written_as_a_ros_map_file_and_plotted(tmp_path):
     assert raw.startswith(header) and len(raw) == len(header) + 12
     body = raw[len(header):]
     assert body[3] == OCCUPIED and body[8] == FREE  # the image's first row is the grid's top
+
+
+def test_corrections_are_the_accepted_relocalisations_and_merges():
+    from mrslam_core.evaluation.report import corrections
+
+    report = {"relocalizations": [{"robot": "r1", "stamp_ns": 3_000_000_000, "cause": "map_check", "accepted": True},
+                                  {"robot": "r1", "stamp_ns": 1_000_000_000, "cause": "gap", "accepted": True},
+                                  {"robot": "r2", "stamp_ns": 2_000_000_000, "cause": "gap", "accepted": False}],
+              "merges": [{"robot": "r3", "stamp_ns": 5_000_000_000, "accepted": True}]}
+    assert corrections(report) == {"r1": [(1.0, "gap"), (3.0, "map_check")], "r3": [(5.0, "merge")]}
+    assert corrections({}) == {}
+
+
+def test_a_large_map_is_drawn_as_a_density_with_few_ellipses(tmp_path):
+    import matplotlib.pyplot as plt
+
+    from mrslam_core.evaluation import plots
+
+    rng = np.random.default_rng(0)
+    n = 20_000
+    mean = np.column_stack([rng.uniform(0, 40, n), rng.uniform(0, 30, n), rng.uniform(0, 2, n)])
+    cov = np.broadcast_to(np.diag([0.01, 0.01, 0.01]), (n, 3, 3)).copy()
+    cov[:5] *= 100.0  # five uncertain landmarks: their ellipses are among the drawn ones
+    t = np.arange(50) * 0.2
+    est = np.column_stack([t, t, 0 * t])
+    drawn = []
+    real = plots.EllipseCollection
+
+    def spy(widths, *args, **kwargs):
+        drawn.append(np.asarray(widths))
+        return real(widths, *args, **kwargs)
+
+    plots.EllipseCollection = spy
+    try:
+        out = plots.plot_run(tmp_path, {"r1": {"t": t, "est": est, "gt": est + 0.05, "odom": None}},
+                             {"mean": mean, "cov": cov}, corrections={"r1": [(2.0, "gap")]})
+    finally:
+        plots.EllipseCollection = real
+        plt.close("all")
+    assert {p.name for p in out} == {"trajectories.png", "map.png", "errors.png"}
+    assert len(drawn) == 1 and len(drawn[0]) == plots.MAX_ELLIPSES
+    assert np.sort(drawn[0])[-5:].min() > 0.5  # the five uncertain ones (2σ width 0.8 m) are drawn
