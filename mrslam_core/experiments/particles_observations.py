@@ -59,24 +59,24 @@ def plot(errors: dict[tuple[int, int], list[float]], particles, observations, pa
     import matplotlib.pyplot as plt
 
     med = {key: float(np.median(v)) for key, v in errors.items()}
-    fig, (a, b) = plt.subplots(1, 2, figsize=(11, 4.2))
-    for bb in observations:
-        a.plot(particles, [med[(m, bb)] for m in particles], marker="o", label=f"B = {bb}")
-    a.set_xscale("log")
-    a.set_yscale("log")
-    a.set_xlabel("particles M")
-    a.set_ylabel("RMS position error [m]")
-    a.set_title("error against the particle count")
-    a.legend()
-    a.grid(True, which="both", alpha=0.3)
-    for m in particles:
-        b.plot(observations, [med[(m, bb)] for bb in observations], marker="o", label=f"M = {m}")
-    b.set_yscale("log")
-    b.set_xlabel("observations per robot and step B")
-    b.set_ylabel("RMS position error [m]")
-    b.set_title("error against the observations per step")
-    b.legend(ncol=2, fontsize=8)
-    b.grid(True, which="both", alpha=0.3)
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
+    panels = (  # x values, the lines (label, key of each x), x label, title, log x
+        (particles, [(f"B = {bb}", [(m, bb) for m in particles]) for bb in observations],
+         "particles M", "error against the particle count", True),
+        (observations, [(f"M = {m}", [(m, bb) for bb in observations]) for m in particles],
+         "observations per robot and step B", "error against the observations per step", False),
+    )
+    for ax, (xs, lines, xlabel, title, log_x) in zip(axes, panels):
+        for label, keys in lines:
+            ax.plot(xs, [med[key] for key in keys], marker="o", label=label)
+        if log_x:
+            ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xlabel(xlabel)
+        ax.set_ylabel("RMS position error [m]")
+        ax.set_title(title)
+        ax.legend(ncol=1 if log_x else 2, fontsize=8)
+        ax.grid(True, which="both", alpha=0.3)
     fig.suptitle("Two robots, synthetic stereo world, FastSLAM 1.0 (median over seeds)")
     fig.tight_layout()
     fig.savefig(path, dpi=120)
