@@ -90,6 +90,10 @@ class FrontendNode(Node):
         # the robot's wheel odometry, when it has one, predicts the tracks' search windows
         self._odom: deque[tuple[int, np.ndarray]] = deque(maxlen=500)
         self._odom_at_frame: np.ndarray | None = None
+        #: frames of a robot with wheel odometry that went without its prior, by cause: the
+        #: odometry at the frame's stamp had not arrived yet (``behind``), or the previous frame
+        #: had none (``previous``); reported on /diagnostics as ``prior_missing_*``
+        self.prior_missing = {"behind": 0, "previous": 0}
         self.create_subscription(Odometry, "odom", self.on_odom, 50)
         self._vo_cov = np.zeros((3, 3))  # the planar pose covariance of the visual odometry
         self._vo_stamp: int | None = None
@@ -140,6 +144,12 @@ class FrontendNode(Node):
             t = np.array([s for s, _ in self._odom], float)
             pose = interpolate_poses(np.array([float(stamp_ns)]), t, np.array([p for _, p in self._odom]))[0]
         last, self._odom_at_frame = self._odom_at_frame, pose
+        if self._odom and pose is None and stamp_ns > self._odom[-1][0]:
+            self.prior_missing["behind"] += 1
+        elif self._odom and pose is not None and last is None:
+            self.prior_missing["previous"] += 1
+        for cause, n in self.prior_missing.items():
+            self.diag.set(f"prior_missing_{cause}", n)
         if pose is None or last is None:
             return None
         return planar_motion(between(last, pose))
