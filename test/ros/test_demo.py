@@ -17,7 +17,7 @@ BIN = Path(sys.executable).parent
 # A live run is a smoke test: DDS and thread timing change the exploration paths, so it is not
 # repeatable, and its bounds must not be missable by chance. Issue 6's per-robot target (ATE RMSE
 # <= 0.10 m and <= 30 % of the odometry's) is missed by one robot in some live demos (docs/results.md:
-# 5 of 12 with the current frontend, 1 of 38 before; the miss traced before: a robot a few degrees
+# 6 of 13 with the current frontend, 1 of 38 before; the miss traced before: a robot a few degrees
 # off after a turn among teammates that maps their corridor again). Here the team's median robot must meet it (two
 # robots missing together in one run was never seen), and every robot must stay in the building's
 # scale (a robot lost by the filter is metres off).
