@@ -8,7 +8,9 @@ dataclasses and back, strictly: unknown keys, missing required keys and wrong ty
 
 from __future__ import annotations
 
+import copy
 import dataclasses
+import functools
 import types
 import typing
 from pathlib import Path
@@ -175,6 +177,34 @@ def load_yaml(cls: type[T], path: str | Path) -> T:
         raise ConfigError(f"{path}: {exc}") from exc
 
 
+#: the folder of the named profiles: sim_team.yaml (the simulated team), real_stereo.yaml (a robot
+#: with a real stereo head), mrclam.yaml (the MR.CLAM filter)
+PROFILES = Path(__file__).resolve().parents[1] / "config"
+
+
+def _profile_parameters(path: Path) -> dict:
+    """A profile's mapping: a ROS params file's ``/**: ros__parameters`` or the file's top level."""
+    data = _read_mapping(path)
+    if set(data) == {"/**"}:
+        data = (data["/**"] or {}).get("ros__parameters", {}) or {}
+    return data
+
+
+@functools.lru_cache(maxsize=None)
+def _cached_profile(path: Path) -> dict:
+    return _profile_parameters(path)
+
+
+def profile_section(cls: type[T], name: str, section: str) -> T:
+    """Section ``section`` of the named profile ``PROFILES / name`` as dataclass ``cls``: the class
+    default of a config whose values live in that profile (the file is read once)."""
+    path = PROFILES / name
+    try:
+        return from_dict(cls, copy.deepcopy(_cached_profile(path).get(section) or {}))
+    except ConfigError as exc:
+        raise ConfigError(f"{path}: {section}: {exc}") from exc
+
+
 def load_profile(cls: type[T], path: str | Path, overrides: dict[str, Any] | None = None) -> T:
     """Read a named profile into dataclass ``cls``: the sections of the profile that are fields of
     ``cls``, then ``overrides`` (a nested mapping) on top.
@@ -185,9 +215,7 @@ def load_profile(cls: type[T], path: str | Path, overrides: dict[str, Any] | Non
     keys are checked strictly (:func:`from_dict`).
     """
     path = Path(path)
-    data = _read_mapping(path)
-    if set(data) == {"/**"}:
-        data = (data["/**"] or {}).get("ros__parameters", {}) or {}
+    data = _profile_parameters(path)
     names = {f.name for f in dataclasses.fields(cls)}  # type: ignore[arg-type]
     picked = {k: v for k, v in data.items() if k in names}
     try:

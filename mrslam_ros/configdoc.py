@@ -109,15 +109,16 @@ def _type_name(tp) -> str:
     return str(text).replace("typing.", "").replace("NoneType", "None")
 
 
-def _default(cls: type, f: dataclasses.Field, value) -> str:
+def _default(value) -> str:
     if dataclasses.is_dataclass(value):
         return f"[{type(value).__name__}](#{type(value).__name__.lower()})"
     return f"`{value!r}`"
 
 
 def _sections(cls: type, seen: dict[str, type]) -> None:
+    instance = cls()
     for f in dataclasses.fields(cls):
-        value = getattr(cls(), f.name)
+        value = getattr(instance, f.name)
         if dataclasses.is_dataclass(value) and type(value).__name__ not in seen:
             seen[type(value).__name__] = type(value)
             _sections(type(value), seen)
@@ -133,7 +134,7 @@ def _table(cls: type) -> list[str]:
         meaning = docs.get(f.name) or (f"the `{f.name}` section" if dataclasses.is_dataclass(value) else "")
         meaning = meaning.replace("|", "\\|")
         rows.append(f"| `{f.name}` | {_type_name(hints.get(f.name, f.type)).replace('|', '&#124;')} | "
-                    f"{_default(cls, f, getattr(instance, f.name)).replace('|', '&#124;')} | {meaning} |")
+                    f"{_default(value).replace('|', '&#124;')} | {meaning} |")
     return rows
 
 

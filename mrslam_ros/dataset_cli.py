@@ -22,13 +22,14 @@ import shutil
 import sys
 from pathlib import Path
 
+from mrslam_core.configio import PROFILES
 from mrslam_core.datasets.stereo import FORMATS, DatasetError, open_sequence
 from mrslam_ros.bag import STORAGES, BagError
 
 PROG = "mrslam dataset import"
 RUN = "mrslam dataset run"
 #: the real stereo robot profile, used by ``run`` unless ``--config`` names another
-PROFILE = Path(__file__).resolve().parents[1] / "config" / "real_stereo.yaml"
+PROFILE = PROFILES / "real_stereo.yaml"
 
 
 class _UsageError(Exception):

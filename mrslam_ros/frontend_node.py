@@ -144,12 +144,14 @@ class FrontendNode(Node):
             t = np.array([s for s, _ in self._odom], float)
             pose = interpolate_poses(np.array([float(stamp_ns)]), t, np.array([p for _, p in self._odom]))[0]
         last, self._odom_at_frame = self._odom_at_frame, pose
+        cause = None
         if self._odom and pose is None and stamp_ns > self._odom[-1][0]:
-            self.prior_missing["behind"] += 1
+            cause = "behind"
         elif self._odom and pose is not None and last is None:
-            self.prior_missing["previous"] += 1
-        for cause, n in self.prior_missing.items():
-            self.diag.set(f"prior_missing_{cause}", n)
+            cause = "previous"
+        if cause is not None:
+            self.prior_missing[cause] += 1
+            self.diag.set(f"prior_missing_{cause}", self.prior_missing[cause])
         if pose is None or last is None:
             return None
         return planar_motion(between(last, pose))

@@ -104,11 +104,11 @@ class BagPlayer:
             prime: every topic, then wait until each matched reliable subscription acknowledged
                 its first message (at most ``wait_for_subscribers`` s in all): a subscription acks
                 only once it knows the publisher, so this ends the two-sided discovery that a
-                matched count on the publisher's side does not. In one CI run a central
-                node lost a robot's first 1.6 s of sets, played after the matched count and a 1 s
-                start delay. Without ``prime``
-                only the ``sensor_msgs/msg/CameraInfo`` topics: a camera's calibration is static,
-                and a frontend drops every image pair until it has both cameras' CameraInfo.
+                matched count on the publisher's side does not. In one CI run a central node
+                lost a robot's first 1.6 s of sets, played after the matched count and a 1 s
+                start delay. Without ``prime`` only the ``sensor_msgs/msg/CameraInfo`` topics: a
+                camera's calibration is static, and a frontend drops every image pair until it
+                has both cameras' CameraInfo.
                 Played only in their turn, they went out in one burst with the first two 450 kB
                 images of a dataset bag, and in 9 of 23 live runs on a loaded 2-core machine some
                 were lost and repaired only by the reliable writer's next heartbeat, 3 s later:

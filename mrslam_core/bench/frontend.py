@@ -186,12 +186,12 @@ def main(argv: list[str] | None = None) -> int:
               f"{100 * r['within_1px']:5.1f} %  median error {r['median_error_px']:.3f} px")
     kitti = root / "kitti_excerpt"
     if (kitti / "calib.txt").is_file():
-        from mrslam_core.configio import load_profile
+        from mrslam_core.configio import PROFILES, load_profile
         from mrslam_core.datasets.stereo import open_sequence
         from mrslam_core.pipelines.dataset import DatasetRunConfig
 
         seq = open_sequence("kitti", kitti)
-        profile = load_profile(DatasetRunConfig, Path(__file__).resolve().parents[2] / "config" / "real_stereo.yaml")
+        profile = load_profile(DatasetRunConfig, PROFILES / "real_stereo.yaml")
         kpairs = [(*seq.read(i), int(f.stamp_ns)) for i, f in enumerate(seq.frames)]
         result["kitti"] = {"image": f"{seq.rig.width}x{seq.rig.height}", "pairs": len(kpairs), "speed": {}}
         print(f"frontend step with visual odometry, {seq.rig.width}x{seq.rig.height} KITTI pairs, real stereo "

@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-from pathlib import Path
 
 import numpy as np
 from scipy.optimize import minimize
@@ -153,10 +152,10 @@ def calibrate(seq: StereoSequence, cfg: FrontendConfig, rounds: int = 3) -> tupl
 
 
 def main(argv: list[str]) -> int:
-    from mrslam_core.configio import load_profile
+    from mrslam_core.configio import PROFILES, load_profile
     from mrslam_core.pipelines.dataset import DatasetRunConfig
 
-    profile = Path(__file__).resolve().parents[2] / "config" / "real_stereo.yaml"
+    profile = PROFILES / "real_stereo.yaml"
     ap = argparse.ArgumentParser(prog="mrslam experiment stereo_frontend", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("format")

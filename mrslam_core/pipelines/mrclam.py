@@ -10,7 +10,6 @@ every robot's pose). Start poses come from ground truth at the first common time
 from __future__ import annotations
 
 import argparse
-import functools
 import sys
 import time
 from dataclasses import dataclass, field, replace
@@ -19,7 +18,7 @@ from typing import Literal
 
 import numpy as np
 
-from mrslam_core.configio import ConfigError, load_profile, load_yaml
+from mrslam_core.configio import ConfigError, load_yaml, profile_section
 from mrslam_core.datasets.mrclam import MrclamDataset, OdometryIntegrator
 from mrslam_core.evaluation.report import write_run
 from mrslam_core.slam.config import FilterConfig
@@ -27,19 +26,8 @@ from mrslam_core.slam.filter import MultiRobotFastSLAM, RobotUpdate
 from mrslam_core.types import ObservationSet, RobotSighting
 
 
-#: the MR.CLAM profile: MrclamConfig's filter default
-PROFILE = Path(__file__).resolve().parents[2] / "config" / "mrclam.yaml"
-
-
-@dataclass(frozen=True)
-class _Profile:
-    filter: FilterConfig = field(default_factory=FilterConfig)
-
-
-@functools.lru_cache(maxsize=1)
-def mrclam_profile() -> _Profile:
-    """The ``filter`` section of config/mrclam.yaml (read once)."""
-    return load_profile(_Profile, PROFILE)
+#: the MR.CLAM profile (in configio.PROFILES): MrclamConfig's filter default
+MRCLAM_PROFILE = "mrclam.yaml"
 
 
 @dataclass(frozen=True)
@@ -64,7 +52,7 @@ class MrclamConfig:
             increments against Vicon: 0.041 rad undelayed, 0.026 rad delayed).
     """
 
-    filter: FilterConfig = field(default_factory=lambda: mrclam_profile().filter)
+    filter: FilterConfig = field(default_factory=lambda: profile_section(FilterConfig, MRCLAM_PROFILE, "filter"))
     sigma_range: float = 0.15
     sigma_bearing: float = 0.02
     sigma_sighting_range: float = 0.25

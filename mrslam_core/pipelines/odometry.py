@@ -19,6 +19,7 @@ numbers.
 from __future__ import annotations
 
 from collections import deque
+
 import numpy as np
 
 from mrslam_core.evaluation.metrics import interpolate_poses

@@ -10,7 +10,6 @@ usual run folder (report.json, TUM files, plots, config.yaml).
 from __future__ import annotations
 
 import argparse
-import functools
 import sys
 import time
 from dataclasses import dataclass, field, replace
@@ -18,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mrslam_core.configio import ConfigError, load_profile, load_yaml, positive_int
+from mrslam_core.configio import ConfigError, load_yaml, positive_int, profile_section
 from mrslam_core.evaluation.report import write_run
 from mrslam_core.exploration.config import ExplorationConfig, GridConfig
 from mrslam_core.exploration.coverage import explored_fraction
@@ -35,21 +34,8 @@ from mrslam_core.sim.simulation import Simulation
 from mrslam_core.slam.config import FilterConfig
 
 
-#: the simulated team profile: TeamConfig's frontend, filter and exploration defaults
-PROFILE = Path(__file__).resolve().parents[2] / "config" / "sim_team.yaml"
-
-
-@dataclass(frozen=True)
-class _Profile:
-    frontend: FrontendConfig = field(default_factory=FrontendConfig)
-    filter: FilterConfig = field(default_factory=FilterConfig)
-    exploration: ExplorationConfig = field(default_factory=ExplorationConfig)
-
-
-@functools.lru_cache(maxsize=1)
-def team_profile() -> _Profile:
-    """The sections of config/sim_team.yaml (read once)."""
-    return load_profile(_Profile, PROFILE)
+#: the simulated team profile (in configio.PROFILES): TeamConfig's frontend, filter and exploration defaults
+TEAM_PROFILE = "sim_team.yaml"
 
 
 @dataclass(frozen=True)
@@ -72,10 +58,10 @@ class TeamConfig:
     control_period: float = 0.2
     explore: bool = True
     sim: SimConfig = field(default_factory=SimConfig)
-    frontend: FrontendConfig = field(default_factory=lambda: team_profile().frontend)
-    filter: FilterConfig = field(default_factory=lambda: team_profile().filter)
+    frontend: FrontendConfig = field(default_factory=lambda: profile_section(FrontendConfig, TEAM_PROFILE, "frontend"))
+    filter: FilterConfig = field(default_factory=lambda: profile_section(FilterConfig, TEAM_PROFILE, "filter"))
     map_check: MapCheckConfig = field(default_factory=MapCheckConfig)
-    exploration: ExplorationConfig = field(default_factory=lambda: team_profile().exploration)
+    exploration: ExplorationConfig = field(default_factory=lambda: profile_section(ExplorationConfig, TEAM_PROFILE, "exploration"))
     grid: GridConfig = field(default_factory=GridConfig)
 
     def __post_init__(self) -> None:

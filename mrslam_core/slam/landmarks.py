@@ -475,16 +475,12 @@ class LandmarkStore:
         return remap
 
     def _new_pool(self, n: int) -> None:
-        """An empty pool of ``n`` chunks (chunk 0 the empty chunk) and no nodes."""
+        """An empty pool of ``n`` chunks (their counts and the free list follow from
+        :meth:`_build_nodes`)."""
         for f in _FIELDS:
             old = getattr(self, f"pool_{f}")
             setattr(self, f"pool_{f}", np.zeros((n,) + old.shape[1:], old.dtype))
         self.refcount = np.zeros(n, np.int64)
-        self.refcount[_EMPTY] = 1
-        self._free_chunks = _FreeList()
-        self.nodes = np.zeros((0, self.fanout), np.int64)
-        self.node_ref = np.zeros(0, np.int64)
-        self._free_nodes = _FreeList()
 
     def _build_nodes(self, chunk_table: np.ndarray) -> None:
         """Table, nodes and reference counts from each particle's chunk per column (M, columns),
@@ -510,10 +506,14 @@ class LandmarkStore:
             first += pat.shape[0]
         self.refcount[:] = np.bincount(self.nodes.ravel(), minlength=self.refcount.size)
         self.refcount[_EMPTY] += 1
-        self._free_nodes = _FreeList()
-        self._free_chunks = _FreeList()
-        self._free_chunks.push(np.flatnonzero(self.refcount == 0)[::-1])
+        self._refill_free_lists()
         self._grow_nodes(max(total, 1) * 2)
+
+    def _refill_free_lists(self) -> None:
+        """The free lists from the reference counts (the lowest free ids are taken first)."""
+        self._free_nodes, self._free_chunks = _FreeList(), _FreeList()
+        self._free_nodes.push(np.flatnonzero(self.node_ref == 0)[::-1])
+        self._free_chunks.push(np.flatnonzero(self.refcount == 0)[::-1])
 
     # ------------------------------------------------------------------ state
     def state(self) -> dict[str, np.ndarray]:
@@ -545,10 +545,8 @@ class LandmarkStore:
         store.size = int(size)
         if "nodes" not in arrays:
             one_level = np.array(arrays["table"], np.int64)
-            problems = [] if one_level.size == 0 or (0 <= one_level.min() and one_level.max() < store.refcount.size) \
-                else ["table names a chunk outside the pool"]
-            if problems:
-                raise ValueError(problems[0])
+            if one_level.size and not (0 <= one_level.min() and one_level.max() < store.refcount.size):
+                raise ValueError("table names a chunk outside the pool")
             # make room for the empty chunk at 0: shift every id by one
             for f in _FIELDS:
                 old = getattr(store, f"pool_{f}")
@@ -556,11 +554,7 @@ class LandmarkStore:
             store.refcount = np.zeros(store.pool_mean.shape[0], np.int64)
             store._build_nodes(one_level + 1)
         else:
-            store._free_nodes = _FreeList()
-            store._free_nodes.push(np.flatnonzero(store.node_ref == 0)[::-1])
-            store._free_chunks = _FreeList()
-            free = np.flatnonzero(store.refcount == 0)
-            store._free_chunks.push(free[::-1])
+            store._refill_free_lists()
         problems = store.check()
         if problems:
             raise ValueError("; ".join(problems))
@@ -569,7 +563,7 @@ class LandmarkStore:
 
     def check(self) -> list[str]:
         """What is inconsistent in the store's arrays (empty: nothing)."""
-        m, dim, chunk = self.num_particles, self.dim, self.chunk
+        dim, chunk = self.dim, self.chunk
         pool, q, cap = self.refcount.shape[0], self.node_ref.shape[0], self.descriptor.shape[0]
         live = self.node_ref > 0
         if self.nodes.shape != (q, self.fanout):
@@ -578,7 +572,6 @@ class LandmarkStore:
             (self.table.ndim == 2 and self.table.shape[1] * self.fanout * chunk >= self.size,
              "fewer node columns than slots"),
             (self.table.size == 0 or (0 <= self.table.min() and self.table.max() < q), "table names a node outside the nodes"),
-            (self.nodes.shape == (q, self.fanout), "nodes shape"),
             (not live.any() or (0 <= self.nodes[live].min() and self.nodes[live].max() < pool),
              "a node names a chunk outside the pool"),
             (self.pool_mean.shape == (pool, chunk, dim), "pool_mean shape"),
