@@ -106,30 +106,32 @@ class BagPlayer:
                 only once it knows the publisher, so this ends the two-sided discovery that a
                 matched count on the publisher's side does not. In one CI run a central node
                 lost a robot's first 1.6 s of sets, played after the matched count and a 1 s
-                start delay. Without ``prime`` only the ``sensor_msgs/msg/CameraInfo`` topics: a
-                camera's calibration is static, and a frontend drops every image pair until it
-                has both cameras' CameraInfo.
-                Played only in their turn, they went out in one burst with the first two 450 kB
-                images of a dataset bag, and in 9 of 23 live runs on a loaded 2-core machine some
-                were lost and repaired only by the reliable writer's next heartbeat, 3 s later:
-                7-16 of KITTI's first frames were dropped (``no_camera_info``).
+                start delay. Without ``prime`` only the ``sensor_msgs/msg/CameraInfo`` topics.
+                Either way the calibration goes first: a camera's calibration is static, and a
+                frontend drops every image pair until it has both cameras' CameraInfo. Played
+                only in their turn, they went out in one burst with the first two 450 kB images
+                of a dataset bag, and in 9 of 23 live runs on a loaded 2-core machine some were
+                lost and repaired only by the reliable writer's next heartbeat, 3 s later: 7-16 of
+                KITTI's first frames were dropped (``no_camera_info``); primed together with the
+                first images, a first pair reached a frontend before its right CameraInfo once.
         """
         from rclpy.duration import Duration
 
-        wanted = set(self.topics) if prime else {
-            t for t in self.topics if self.info.topics[t].msgtype == "sensor_msgs/msg/CameraInfo"}
+        calibration = {t for t in self.topics if self.info.topics[t].msgtype == "sensor_msgs/msg/CameraInfo"}
+        wanted = set(self.topics) if prime else calibration
         first: dict[str, bytes] = {}
         if wanted:
             for m in read_bag(self.path, sorted(wanted)):
                 first.setdefault(m.topic, m.data)
                 if len(first) == len(wanted):
                     break
-        for topic, data in first.items():
-            self._pubs[topic].publish(data)
-            self.published[topic] += 1
-        if prime:
-            end = time.monotonic() + self.wait_for_subscribers
-            for topic in first:
+        end = time.monotonic() + self.wait_for_subscribers
+        for group in (calibration, wanted - calibration):  # the calibration acknowledged first
+            topics = sorted(group & first.keys())
+            for topic in topics:
+                self._pubs[topic].publish(first[topic])
+                self.published[topic] += 1
+            for topic in topics if prime else ():
                 left = end - time.monotonic()
                 if left <= 0 or self._stop:
                     break
