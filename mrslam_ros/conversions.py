@@ -13,6 +13,7 @@ import numpy as np
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import (
+    Point,
     Pose,
     PoseArray,
     PoseStamped,
@@ -535,6 +536,32 @@ def landmark_markers(mean: np.ndarray, cov: np.ndarray, stamp_ns: int, frame_id:
         out.markers.append(m)
     return out
 
+
+
+def points_marker(xy: np.ndarray, stamp_ns: int, frame_id: str, ns: str, size: float = 0.25,
+                  rgba=(1.0, 0.5, 0.0, 0.9)) -> MarkerArray:
+    """Points (N, 2) or (N, 3) [m] -> a MarkerArray of one SPHERE_LIST (id 0, namespace ``ns``),
+    spheres ``size`` [m] across; an empty list clears the points a viewer shows."""
+    pts = np.asarray(xy, float)
+    if pts.size == 0:
+        pts = pts.reshape(0, 2)
+    if pts.ndim != 2 or pts.shape[1] not in (2, 3) or not np.isfinite(pts).all():
+        raise ConversionError(f"points must be finite (N, 2) or (N, 3), got shape {pts.shape}")
+    m = Marker(ns=ns, id=0, type=Marker.SPHERE_LIST, action=Marker.ADD)
+    m.header.stamp, m.header.frame_id = ns_to_stamp(int(stamp_ns)), frame_id
+    m.pose.orientation.w = 1.0
+    m.scale.x = m.scale.y = m.scale.z = float(size)
+    m.color.r, m.color.g, m.color.b, m.color.a = (float(v) for v in rgba)
+    for p in pts:
+        q = Point(x=float(p[0]), y=float(p[1]), z=float(p[2]) if len(p) == 3 else 0.0)
+        m.points.append(q)
+    return MarkerArray(markers=[m])
+
+
+def marker_points(msg: MarkerArray) -> np.ndarray:
+    """The points (N, 3) [m] of a MarkerArray's SPHERE_LIST / POINTS markers (frontiers)."""
+    pts = [(p.x, p.y, p.z) for m in msg.markers if m.type in (Marker.SPHERE_LIST, Marker.POINTS) for p in m.points]
+    return np.array(pts, float).reshape(-1, 3)
 
 # ----------------------------------------------------------------------------- diagnostics
 LEVELS = {"ok": DiagnosticStatus.OK, "warn": DiagnosticStatus.WARN, "error": DiagnosticStatus.ERROR,

@@ -8,8 +8,10 @@ pair's stamp, and the SLAM node stamps the pose of that set with it): the latest
 or two older than a new scan, and a robot turning at 0.5 rad/s would lay its scans 3-6° off,
 eroding the walls at door frames that the planner then cuts through. A scan whose pose never
 comes (its set dropped by the SLAM node) is counted, not inserted. Publishes ``/map``
-(OccupancyGrid; the grid grows with the scans, and info.origin, width and height with it),
-``/<robot>/cmd_vel`` and ``/<robot>/goal`` on a timer.
+(OccupancyGrid; the grid grows with the scans, and info.origin, width and height with it) and
+``/exploration/frontiers`` (MarkerArray: one sphere per candidate target of the last plan) on
+one timer, ``/<robot>/cmd_vel``, ``/<robot>/goal`` (PoseStamped) and ``/<robot>/plan`` (Path, the
+A* path to the goal, when it changes) on another.
 """
 
 from __future__ import annotations
@@ -20,14 +22,23 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped, Twist
-from nav_msgs.msg import OccupancyGrid
+from nav_msgs.msg import OccupancyGrid, Path
 from rclpy.node import Node
 from sensor_msgs.msg import LaserScan
+from visualization_msgs.msg import MarkerArray
 
 from mrslam_core.exploration.config import ExplorationConfig, GridConfig
 from mrslam_core.exploration.explorer import Explorer
 from mrslam_core.exploration.grid import OccupancyGrid as Grid
-from mrslam_ros.conversions import laser_to_scan, msg_to_pose, occupancy_msg, pose_to_msg, stamp_to_ns
+from mrslam_ros.conversions import (
+    laser_to_scan,
+    msg_to_pose,
+    occupancy_msg,
+    path_msg,
+    points_marker,
+    pose_to_msg,
+    stamp_to_ns,
+)
 from mrslam_ros.params import declare_config, read_config
 from mrslam_ros.spin import run_node
 from mrslam_ros.sync import ApproximateTimeSync
@@ -86,7 +97,10 @@ class ExploreNode(Node):
         self.scans_received = self.scans_inserted = 0
         self.cmd_pub = {r: self.create_publisher(Twist, f"/{r}/cmd_vel", 10) for r in self.cfg.robots}
         self.goal_pub = {r: self.create_publisher(PoseStamped, f"/{r}/goal", 10) for r in self.cfg.robots}
+        self.plan_pub = {r: self.create_publisher(Path, f"/{r}/plan", 10) for r in self.cfg.robots}
         self.map_pub = self.create_publisher(OccupancyGrid, "/map", 1)
+        self.frontier_pub = self.create_publisher(MarkerArray, "/exploration/frontiers", 1)
+        self._planned: dict[str, object] = {}  # per robot, the goal whose plan went out last
         for r in self.cfg.robots:
             self.create_subscription(PoseWithCovarianceStamped, f"/{r}/pose", lambda m, r=r: self.on_pose(r, m), 10)
             self.create_subscription(LaserScan, f"/{r}/scan", lambda m, r=r: self.on_scan(r, m), 10)
@@ -153,6 +167,11 @@ class ExploreNode(Node):
                 msg.header.frame_id = self.cfg.map_frame
                 msg.pose = pose_to_msg(np.array([goal.target[0], goal.target[1], 0.0]))
                 self.goal_pub[robot].publish(msg)
+            if goal is not self._planned.get(robot):
+                self._planned[robot] = goal
+                path = np.zeros((0, 2)) if goal is None else np.asarray(goal.path, float).reshape(-1, 2)
+                poses = np.column_stack([path, np.zeros(len(path))])
+                self.plan_pub[robot].publish(path_msg(poses, np.full(len(path), self.now_ns), self.cfg.map_frame))
 
     def publish_map(self) -> None:
         """The grid as it is now: its size and origin follow its growth; nothing before the first scan."""
@@ -160,6 +179,7 @@ class ExploreNode(Node):
             return
         self.map_pub.publish(occupancy_msg(self.grid.probability(), self.grid.observed, self.grid.origin,
                                            self.grid.res, self.now_ns, self.cfg.map_frame))
+        self.frontier_pub.publish(points_marker(self.explorer.frontiers, self.now_ns, self.cfg.map_frame, "frontiers"))
 
 
 def main(argv: list[str] | None = None) -> int:

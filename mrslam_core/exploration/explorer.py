@@ -185,6 +185,8 @@ class Explorer:
     blocked_turns: int = 0
     #: turns on the spot preceded by backing away from an occupied cell (``turn_clearance``)
     turn_backoffs: int = 0
+    #: the candidate targets of the last plan, one per frontier stretch (T, 2) [m] map frame
+    frontiers: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
 
     def _replan(self, grid: OccupancyGrid, poses: dict[str, np.ndarray], now: float) -> None:
         cfg = self.config
@@ -218,6 +220,7 @@ class Explorer:
                 near = np.linalg.norm(grid.centre_of(targets)[:, None] - np.array(blocked)[None], axis=2) < cfg.blacklist_radius
                 waiting |= bool(near[:, np.array(for_now)].any())  # near: (T, B)
                 targets = targets[~near.any(axis=1)]
+        self.frontiers = grid.centre_of(targets) if len(targets) else np.zeros((0, 2))
         if not len(targets) and free.any() and not waiting:
             if self.state is State.EXPLORING:
                 self.state = State.RETURNING if cfg.return_to_start else State.COMPLETE

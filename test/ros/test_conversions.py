@@ -294,3 +294,16 @@ def test_diagnostics_message_and_counters():
     assert diagnostics_to_counters(msg)["/slam"]["update_ms_p95"] == 12.5
     with pytest.raises(ConversionError, match="level"):
         diagnostics_msg("x", {}, 0, level="fatal")
+
+
+def test_points_marker_round_trip_and_clear():
+    from mrslam_ros.conversions import marker_points, points_marker
+
+    xy = np.array([[1.0, 2.0], [-3.5, 0.25]])
+    msg = points_marker(xy, 5_000_000_000, "map", "frontiers", size=0.3)
+    assert len(msg.markers) == 1 and msg.markers[0].header.frame_id == "map"
+    assert msg.markers[0].scale.x == pytest.approx(0.3)
+    np.testing.assert_array_equal(marker_points(msg), [[1.0, 2.0, 0.0], [-3.5, 0.25, 0.0]])
+    assert marker_points(points_marker(np.zeros((0, 2)), 0, "map", "frontiers")).shape == (0, 3)
+    with pytest.raises(ConversionError):
+        points_marker(np.array([[np.nan, 0.0]]), 0, "map", "frontiers")
