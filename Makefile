@@ -17,7 +17,7 @@ INTERFACES := $(wildcard mrslam_ros/interfaces/*/package.xml mrslam_ros/interfac
 $(STAMP): pyproject.toml scripts/build_interfaces.sh $(INTERFACES)
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e ".[ros,rosgen,test,baselines]"
+	$(PY) -m pip install --quiet -e ".[ros,rosgen,test,baselines,view]"
 	scripts/build_interfaces.sh $(VENV)
 	touch $(STAMP)
 

@@ -300,6 +300,10 @@ class BagRecorder:
             try:
                 cls = message_class(msgtype)
                 publishers = self.node.get_publishers_info_by_topic(topic)
+                if not publishers:
+                    # a topic only subscribed so far (a viewer's): its publishers' QoS is not
+                    # known yet, and a latched guess would not match a volatile publisher
+                    continue
                 qos = adapted_to_publishers(publishers, topic)
                 self.writer.add_topic(topic, msgtype, [to_bag_qos(p.qos_profile) for p in publishers])
             except BagError as exc:

@@ -273,6 +273,24 @@ def transform_msg(pose: np.ndarray, stamp_ns: int, parent: str, child: str) -> T
     return msg
 
 
+
+def matrix_transform_msg(t: np.ndarray, stamp_ns: int, parent: str, child: str) -> TransformStamped:
+    """(4, 4) pose of ``child`` in ``parent`` (p_parent = T · p_child) -> TransformStamped (a
+    camera's mount on /tf_static)."""
+    from scipy.spatial.transform import Rotation
+
+    t = np.asarray(t, float)
+    if t.shape != (4, 4) or not np.isfinite(t).all():
+        raise ConversionError(f"transform must be a finite (4, 4) matrix, got shape {t.shape}")
+    msg = TransformStamped()
+    msg.header.stamp = ns_to_stamp(stamp_ns)
+    msg.header.frame_id, msg.child_frame_id = parent, child
+    tr = msg.transform.translation
+    tr.x, tr.y, tr.z = (float(v) for v in t[:3, 3])
+    q = msg.transform.rotation
+    q.x, q.y, q.z, q.w = (float(v) for v in Rotation.from_matrix(t[:3, :3]).as_quat())
+    return msg
+
 # ----------------------------------------------------------------------------- maps
 def occupancy_msg(prob: np.ndarray, known: np.ndarray, origin: np.ndarray, resolution: float,
                   stamp_ns: int, frame_id: str = "map") -> OccupancyGrid:
@@ -452,6 +470,16 @@ def transform_to_pose(msg: TransformStamped) -> tuple[int, str, str, np.ndarray]
     return stamp_to_ns(msg.header.stamp), msg.header.frame_id, msg.child_frame_id, pose
 
 
+
+def transform_to_arrays(msg: TransformStamped) -> tuple[int, str, str, np.ndarray, np.ndarray]:
+    """TransformStamped -> (stamp [ns], parent frame, child frame, translation (3,) [m], rotation
+    quaternion (4,) (x, y, z, w)), in 3-D (a camera's mount as well as a planar pose)."""
+    t, q = msg.transform.translation, msg.transform.rotation
+    xyz, quat = np.array([t.x, t.y, t.z], float), np.array([q.x, q.y, q.z, q.w], float)
+    if not (np.isfinite(xyz).all() and np.isfinite(quat).all()):
+        raise ConversionError(f"transform {msg.header.frame_id} -> {msg.child_frame_id} is not finite")
+    return stamp_to_ns(msg.header.stamp), msg.header.frame_id, msg.child_frame_id, xyz, quat
+
 def tf_message(transforms: Sequence[TransformStamped]):
     """TransformStamped list -> tf2_msgs/TFMessage (for /tf and /tf_static).
 
@@ -537,6 +565,17 @@ def landmark_markers(mean: np.ndarray, cov: np.ndarray, stamp_ns: int, frame_id:
     return out
 
 
+
+
+def marker_ellipsoids(msg: MarkerArray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The SPHERE markers of a MarkerArray (as :func:`landmark_markers` writes them) -> centres
+    (N, 3) [m], orientations (N, 4) (x, y, z, w) and diameters (N, 3) [m]."""
+    spheres = [m for m in msg.markers if m.type == Marker.SPHERE and m.action == Marker.ADD]
+    centres = np.array([(m.pose.position.x, m.pose.position.y, m.pose.position.z) for m in spheres], float)
+    quats = np.array([(m.pose.orientation.x, m.pose.orientation.y, m.pose.orientation.z, m.pose.orientation.w)
+                      for m in spheres], float)
+    sizes = np.array([(m.scale.x, m.scale.y, m.scale.z) for m in spheres], float)
+    return centres.reshape(-1, 3), quats.reshape(-1, 4), sizes.reshape(-1, 3)
 
 def points_marker(xy: np.ndarray, stamp_ns: int, frame_id: str, ns: str, size: float = 0.25,
                   rgba=(1.0, 0.5, 0.0, 0.9)) -> MarkerArray:

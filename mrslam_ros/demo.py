@@ -8,7 +8,8 @@ observations, scans, estimates, commands, /map, /tf, /diagnostics; images with
 folder: ``report.json`` (ATE/RPE per robot against the simulator's ground truth, the central
 node's step latency, drops, explored share), ``trajectories/*.tum``, plots, ``config.yaml``,
 ``slam.yaml`` (the central node's parameters, which ``mrslam replay --offline`` reads), ``bag/``
-and ``logs/`` (one log per node).
+and ``logs/`` (one log per node). With ``--view`` the view node serves the team live to the Foxglove
+app (:mod:`mrslam_ros.view_node`).
 
 The parameters of every node come from one :class:`DemoConfig`, whose ``team`` part is the same
 :class:`mrslam_core.pipelines.team.TeamConfig` the one-process ``mrslam team`` runs.
@@ -30,6 +31,7 @@ import numpy as np
 
 from mrslam_core.configio import ConfigError, load_yaml, positive_int, to_dict, write_yaml
 from mrslam_core.pipelines.team import TeamConfig
+from mrslam_ros.launch import add_view_arguments, view_spec
 
 RECORDED = ("odom", "ground_truth", "observations", "scan", "pose", "cmd_vel", "goal",
             "stereo/left/camera_info", "stereo/right/camera_info")
@@ -117,8 +119,8 @@ def slam_params(cfg: DemoConfig, facts: dict, out: Path):
                           checkpoint=str(out / "slam" / "checkpoint.npz"), checkpoint_period=cfg.checkpoint_period)
 
 
-def launch_config(cfg: DemoConfig, facts: dict, out: Path):
-    """The node processes of the demo."""
+def launch_config(cfg: DemoConfig, facts: dict, out: Path, view=None):
+    """The node processes of the demo (``view``: the view node's spec, or None)."""
     from mrslam_ros.launch import LaunchConfig, NodeSpec
 
     team = cfg.team
@@ -134,6 +136,8 @@ def launch_config(cfg: DemoConfig, facts: dict, out: Path):
     nodes.append(NodeSpec(module="mrslam_ros.explore_node", name="explore",
                           params={"robots": list(names), "control_period": team.control_period,
                                   "exploration": to_dict(team.exploration), "grid": to_dict(team.grid)}))
+    if view is not None:
+        nodes.append(replace(view, params={**view.params, "robots": list(names)}))
     unknown = set(cfg.node_prefix) - {n.label for n in nodes}
     if unknown:
         raise ConfigError(f"node_prefix: no nodes {sorted(unknown)} (have {[n.label for n in nodes]})")
@@ -147,8 +151,9 @@ def launch_config(cfg: DemoConfig, facts: dict, out: Path):
     return LaunchConfig(use_sim_time=True, log_dir=str(out / "logs"), stop_timeout=10.0, nodes=nodes)
 
 
-def run(cfg: DemoConfig, out: Path, log=sys.stdout) -> dict:
-    """Run the team, record it, stop it; returns what the report needs."""
+def run(cfg: DemoConfig, out: Path, log=sys.stdout, view=None) -> dict:
+    """Run the team, record it, stop it; returns what the report needs (``view``: the view
+    node's spec, or None)."""
     import rclpy
     from rclpy.parameter import Parameter
 
@@ -164,13 +169,14 @@ def run(cfg: DemoConfig, out: Path, log=sys.stdout) -> dict:
     topics = ["/clock", "/tf", "/map", "/diagnostics"]
     for n in facts["names"]:
         topics += [f"/{n}/{t}" for t in RECORDED + (IMAGES if cfg.record_images else ())]
-    launcher = Launcher(launch_config(cfg, facts, out), log=open(out / "nodes.log", "w"))
+    launcher = Launcher(launch_config(cfg, facts, out, view), log=open(out / "nodes.log", "w"))
     rclpy.init(args=[])
     node = rclpy.create_node("mrslam_demo", parameter_overrides=[Parameter("use_sim_time", value=True)])
     recorder = BagRecorder(node, bag, topics, cfg.storage)
     end_ns = int(cfg.team.seconds * 1e9)
     wall0 = time.monotonic()
     failed: list[str] = []
+    cpu: dict[str, float] = {}
     try:
         launcher.start()
         print(f"demo: started {len(launcher.procs)} node processes; logs in {out / 'logs'}", file=log, flush=True)
@@ -214,13 +220,14 @@ def run(cfg: DemoConfig, out: Path, log=sys.stdout) -> dict:
                 next_report += 10e9
         for _, f in recover:  # faults still active at the end: undo them so the nodes stop cleanly
             launcher.send_signal(f.node, signal.SIGCONT)
+        cpu = launcher.cpu_seconds()
     finally:
         codes = launcher.stop()
         recorder.close()
         node.destroy_node()
         rclpy.try_shutdown()
     return {"facts": facts, "bag": bag, "exit_codes": codes, "failed": failed, "faults": injected,
-            "wall_s": time.monotonic() - wall0, "counts": dict(recorder.counts)}
+            "wall_s": time.monotonic() - wall0, "counts": dict(recorder.counts), "cpu_s": cpu}
 
 
 def write_report(cfg: DemoConfig, out: Path, facts: dict, extra: dict | None = None,
@@ -270,6 +277,7 @@ def main(argv: list[str]) -> int:
     ap.add_argument("--rtf", type=float, help="real-time factor of the simulator")
     ap.add_argument("--record-images", action="store_true", help="also record the stereo images")
     ap.add_argument("--out", default="runs/demo", help="run folder (default runs/demo)")
+    add_view_arguments(ap)
     args = ap.parse_args(argv)
     try:
         cfg = load_yaml(DemoConfig, args.config) if args.config else DemoConfig()
@@ -289,7 +297,7 @@ def main(argv: list[str]) -> int:
     print(f"mrslam demo: {team.robots} robots, {team.seconds:.0f} s in world {team.sim.world}, "
           f"real-time factor {cfg.real_time_factor:g}; writing {out}", flush=True)
     try:
-        res = run(cfg, out)
+        res = run(cfg, out, view=view_spec(args) if args.view else None)
     except (FileExistsError, ConfigError) as exc:
         print(f"mrslam demo: {exc}", file=sys.stderr)
         return 2
@@ -299,7 +307,8 @@ def main(argv: list[str]) -> int:
         print(f"mrslam demo: the central node wrote no {stats_file}", file=sys.stderr)
     report = write_report(cfg, out, res["facts"], slam_stats=stats, map_npz=out / "slam" / "map.npz",
                           extra={"wall_s": res["wall_s"], "exit_codes": res["exit_codes"],
-                                 "bag_messages": res["counts"], "failed_nodes": res["failed"], "faults": res["faults"]})
+                                 "bag_messages": res["counts"], "failed_nodes": res["failed"], "faults": res["faults"],
+                                 "cpu_s": res["cpu_s"]})
     for name, r in report["robots"].items():
         if "ate_rmse_m" in r:
             print(f"  {name}: ATE {r['ate_rmse_m']:.3f} m (odometry {r['odom_ate_rmse_m']:.3f} m), "
@@ -310,6 +319,10 @@ def main(argv: list[str]) -> int:
     print(f"  landmarks {report['landmarks']}; explored {'n/a' if explored is None else f'{explored:.0%}'}; "
           f"central step p50 {u['p50']:.1f} p95 {u['p95']:.1f} max {u['max']:.1f} ms; drops: {drops}; "
           f"wall {res['wall_s']:.0f} s")
+    if "view" in res["cpu_s"]:
+        others = sum(v for k, v in res["cpu_s"].items() if k != "view")
+        print(f"  view node: {res['cpu_s']['view']:.1f} s CPU, {res['cpu_s']['view'] / max(others, 1e-9):.1%} of the "
+              f"other nodes' {others:.0f} s")
     print(f"report: {out / 'report.json'}")
     return 1 if res["failed"] else 0
 

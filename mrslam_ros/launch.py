@@ -248,6 +248,19 @@ class Launcher:
             spec = replace(spec, args=list(args))
         self.procs[i] = (spec, self._spawn(spec, self.command(spec)))
 
+    def cpu_seconds(self) -> dict[str, float]:
+        """CPU time (user + system) [s] each running node's process has used so far, by label
+        (from /proc; empty where it is not readable, e.g. off Linux)."""
+        out = {}
+        tick = os.sysconf("SC_CLK_TCK")
+        for spec, proc in self.procs:
+            try:
+                fields = Path(f"/proc/{proc.pid}/stat").read_text().rsplit(")", 1)[1].split()
+            except (OSError, IndexError):
+                continue
+            out[spec.label] = (int(fields[11]) + int(fields[12])) / tick  # utime, stime (fields 14, 15)
+        return out
+
     def exited(self) -> dict[str, int]:
         """Exit codes of the nodes that have exited, by label (negative: killed by that signal)."""
         return {s.label: p.returncode for s, p in self.procs if p.poll() is not None}
@@ -287,6 +300,37 @@ class Launcher:
         return self.exited()
 
 
+def add_view_arguments(ap: argparse.ArgumentParser) -> None:
+    """``--view``, ``--view-port``, ``--view-host``, ``--view-ellipsoids``: the options of every
+    command that can start the view node (:mod:`mrslam_ros.view_node`)."""
+    ap.add_argument("--view", action="store_true",
+                    help="also serve a live Foxglove WebSocket view (open ws://HOST:PORT in Foxglove, "
+                         "config/foxglove_layout.json for the panels)")
+    ap.add_argument("--view-port", type=int, help="the view's TCP port (default: the view node's, 8765)")
+    ap.add_argument("--view-host", help="address the view listens on (default 127.0.0.1; 0.0.0.0 for every interface)")
+    ap.add_argument("--view-ellipsoids", action="store_true",
+                    help="also stream the landmarks' covariance ellipsoids (the central node then builds them)")
+
+
+def view_spec(args: argparse.Namespace, robots: list[str] | tuple[str, ...] = ()) -> NodeSpec:
+    """The view node of a command line with :func:`add_view_arguments` (``robots`` empty: the
+    node finds them in the graph)."""
+    params: dict[str, Any] = {"robots": list(robots)}
+    if args.view_port is not None:
+        params["port"] = args.view_port
+    if args.view_host:
+        params["host"] = args.view_host
+    if args.view_ellipsoids:
+        params["ellipsoids"] = True
+    # a view that cannot start (its port taken) must not stop the team
+    return NodeSpec(module="mrslam_ros.view_node", name="view", params=params, required=False)
+
+
+def _robot_namespaces(cfg: LaunchConfig) -> list[str]:
+    """The namespaces of a launch config's frontend nodes: its robots."""
+    return sorted({n.namespace.strip("/") for n in cfg.nodes if n.module == "mrslam_ros.frontend_node" and n.namespace})
+
+
 class _Stop(Exception):
     """SIGTERM to the launcher."""
 
@@ -301,11 +345,14 @@ def main(argv: list[str]) -> int:
     ap.add_argument("config", help="launch YAML (see above)")
     ap.add_argument("--log-dir", help="write one log file per node here (overrides the config's log_dir)")
     ap.add_argument("--dry-run", action="store_true", help="check the config and print the commands only")
+    add_view_arguments(ap)
     args = ap.parse_args(argv)
     try:
         cfg = load_yaml(LaunchConfig, args.config)
         if args.log_dir:
             cfg = replace(cfg, log_dir=str(Path(args.log_dir).resolve()))
+        if args.view:
+            cfg = replace(cfg, nodes=[*cfg.nodes, view_spec(args, _robot_namespaces(cfg))])
         launcher = Launcher(cfg, base_dir=Path(args.config).resolve().parent)
         for spec in cfg.nodes:
             launcher.command(spec)  # check the params files before starting anything

@@ -6,6 +6,9 @@ Every message is published as the serialized bytes stored in the bag (rclpy publ
 ``/tf_static`` stays transient-local). With ``--loop`` the bag starts over when it ends: the clock
 then jumps backwards, which the nodes must count and survive.
 
+``--view`` also starts the view node (a Foxglove WebSocket server, :mod:`mrslam_ros.view_node`) for
+the bag's robots, stopped with the replay.
+
 ``--offline`` feeds the bag straight into the core without ROS; that mode lives in
 :data:`OFFLINE_MODULE` (its ``main(argv) -> int`` receives the same arguments).
 """
@@ -14,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import re
 import sys
 import time
 from collections import Counter
@@ -21,6 +25,7 @@ from collections.abc import Callable, Iterable
 from pathlib import Path
 
 from mrslam_ros.bag import BagError, bag_info, message_class, read_bag
+from mrslam_ros.launch import add_view_arguments, view_spec
 
 #: The module of the offline replay (bag -> core, no ROS), owned by the SLAM pipeline.
 OFFLINE_MODULE = "mrslam_ros.replay_offline"
@@ -235,6 +240,7 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
                          "last topic that got one (default 10)")
     ap.add_argument("--delay", type=float, default=0.5,
                     help="seconds to wait after that before the first message (default 0.5)")
+    add_view_arguments(ap)
     ap.add_argument("--offline", action="store_true", help="feed the bag straight into the core (no ROS)")
     ap.add_argument("--out", help="run folder (with --offline; default <bag>_offline)")
     ap.add_argument("--config", help="central node parameters (with --offline; default slam.yaml beside the bag)")
@@ -264,6 +270,13 @@ def main(argv: list[str]) -> int:
     except BagError as exc:
         print(f"mrslam replay: {exc}", file=sys.stderr)
         return 2
+    viewer = None
+    if args.view:
+        from mrslam_ros.launch import Launcher, LaunchConfig
+
+        robots = sorted({t.split("/")[1] for t in info.topics if re.match(r"^/[^/]+/(pose|observations|stereo/left/image_raw)$", t)})
+        viewer = Launcher(LaunchConfig(nodes=[view_spec(args, robots)], use_sim_time=not args.no_clock), log=sys.stderr)
+        viewer.start()
     rclpy.init()
     node = rclpy.create_node("mrslam_replay")
     try:
@@ -283,6 +296,8 @@ def main(argv: list[str]) -> int:
     finally:
         node.destroy_node()
         rclpy.try_shutdown()
+        if viewer is not None:
+            viewer.stop()
 
 
 if __name__ == "__main__":

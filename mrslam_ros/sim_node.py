@@ -1,5 +1,6 @@
 """The simulated team as a ROS node: /clock, and per robot stereo images with camera_info, wheel
-odometry, ground truth and odom -> base_link on /tf; drives from ``/<robot>/cmd_vel``.
+odometry, ground truth, odom -> base_link on /tf and each camera's optical frame on /tf_static; drives
+from ``/<robot>/cmd_vel``.
 
 The simulation advances ``steps_per_tick`` physics steps per timer tick; with ``real_time_factor``
 > 0 the tick period follows the wall clock, with 0 it runs as fast as it can. Nodes that should
@@ -21,9 +22,16 @@ from tf2_msgs.msg import TFMessage
 
 from mrslam_core.sim.config import SimConfig
 from mrslam_core.sim.simulation import Simulation
-from mrslam_ros.conversions import array_to_image, calibration_to_camera_info, ns_to_stamp, pose_to_msg, transform_msg
+from mrslam_ros.conversions import (
+    array_to_image,
+    calibration_to_camera_info,
+    matrix_transform_msg,
+    ns_to_stamp,
+    pose_to_msg,
+    transform_msg,
+)
 from mrslam_ros.params import declare_config, read_config
-from mrslam_ros.qos import ODOMETRY_HISTORY
+from mrslam_ros.qos import ODOMETRY_HISTORY, TF_STATIC
 from mrslam_ros.spin import run_node
 
 
@@ -64,6 +72,11 @@ class SimNode(Node):
         self.left_cal, self.right_cal = self.sim.camera_infos()
         self.clock_pub = self.create_publisher(Clock, "/clock", 10)
         self.tf_pub = self.create_publisher(TFMessage, "/tf", 100)
+        # each robot's cameras on its base (REP-105 optical frames), latched for late subscribers
+        self.tf_static_pub = self.create_publisher(TFMessage, "/tf_static", TF_STATIC)
+        self.tf_static_pub.publish(TFMessage(transforms=[
+            matrix_transform_msg(self.sim.camera_extrinsic(side), 0, f"{n}/base_link", f"{n}/camera_{side}_optical")
+            for n in self.names for side in ("left", "right")]))
         self.pubs = {}
         for n in self.names:
             self.pubs[n] = {

@@ -218,6 +218,37 @@ def test_recorder_writes_what_the_graph_carries(tmp_path, storage):
     assert os.path.isfile(tmp_path / "rec" / "metadata.yaml")
 
 
+
+@pytest.mark.ros
+def test_recorder_waits_for_a_publisher_of_a_topic_seen_subscribed_first(tmp_path):
+    """A viewer's subscription to /map puts the topic on the graph before its (volatile) publisher
+    exists; a subscription made then with /map's latched default would never match it."""
+    import rclpy
+    from nav_msgs.msg import OccupancyGrid
+    from rclpy.executors import SingleThreadedExecutor
+
+    from mrslam_ros.bag import BagRecorder
+
+    rclpy.init()
+    try:
+        viewer, talker, recorder_node = (rclpy.create_node(n) for n in ("viewer", "talker", "recorder"))
+        ex = SingleThreadedExecutor()
+        for n in (viewer, talker, recorder_node):
+            ex.add_node(n)
+        viewer.create_subscription(OccupancyGrid, "/map", lambda m: None, 1)
+        rec = BagRecorder(recorder_node, tmp_path / "rec", topics=["/map"], storage="sqlite3", discover_period=0.05)
+        _spin_until(ex, lambda: False, 0.5)  # the recorder sees /map, subscribed only
+        pub = talker.create_publisher(OccupancyGrid, "/map", 1)  # volatile, as the exploration node's
+        _spin_until(ex, lambda: pub.get_subscription_count() >= 2, 5)
+        for _ in range(3):
+            pub.publish(OccupancyGrid())
+            ex.spin_once(timeout_sec=0.01)
+        _spin_until(ex, lambda: rec.counts["/map"] == 3, 5)
+        rec.close()
+    finally:
+        rclpy.shutdown()
+    assert bag_info(tmp_path / "rec").topics["/map"].count == 3
+
 def test_bag_info_cli_and_offline_hook(tmp_path, capsys):
     from mrslam_ros.bag import main as bag_main
     from mrslam_ros.replay import OFFLINE_MODULE
