@@ -25,6 +25,7 @@ TOP = (
     ("mrslam_ros.frontend_node:FrontendNodeConfig", "a stereo frontend node's ROS parameters"),
     ("mrslam_ros.slam_node:SlamNodeConfig", "the central SLAM node's ROS parameters (`mrslam replay --offline` too)"),
     ("mrslam_ros.explore_node:ExploreNodeConfig", "the exploration node's ROS parameters"),
+    ("mrslam_ros.view_node:ViewNodeConfig", "the view node's ROS parameters (the Foxglove WebSocket server)"),
     ("mrslam_core.pipelines.mrclam:MrclamConfig", "`mrslam mrclam DIR --config Y`"),
     ("mrslam_core.pipelines.dataset:DatasetRunConfig", "`mrslam dataset run ... --config Y`"),
 )

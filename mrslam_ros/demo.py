@@ -135,7 +135,8 @@ def launch_config(cfg: DemoConfig, facts: dict, out: Path, view=None):
     nodes.append(NodeSpec(module="mrslam_ros.slam_node", name="slam", params=to_dict(slam_params(cfg, facts, out))))
     nodes.append(NodeSpec(module="mrslam_ros.explore_node", name="explore",
                           params={"robots": list(names), "control_period": team.control_period,
-                                  "exploration": to_dict(team.exploration), "grid": to_dict(team.grid)}))
+                                  "exploration": to_dict(team.exploration), "control": to_dict(team.control),
+                                  "grid": to_dict(team.grid)}))
     if view is not None:
         nodes.append(replace(view, params={**view.params, "robots": list(names)}))
     unknown = set(cfg.node_prefix) - {n.label for n in nodes}

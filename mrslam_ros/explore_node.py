@@ -1,5 +1,5 @@
 """The central exploration node: one occupancy grid for the team, coordinated frontier goals,
-and each robot's drive command (the path follower runs here, per robot).
+and each robot's drive command (the controller, path follower and recovery, runs here, per robot).
 
 Subscribes ``/<robot>/scan`` (LaserScan in base_link from the frontend) and ``/<robot>/pose``
 (PoseWithCovarianceStamped in the map frame from the SLAM node). Each scan is inserted at its
@@ -27,6 +27,8 @@ from rclpy.node import Node
 from sensor_msgs.msg import LaserScan
 from visualization_msgs.msg import MarkerArray
 
+from mrslam_core.control.config import ControlConfig
+from mrslam_core.control.controller import Controller
 from mrslam_core.exploration.config import ExplorationConfig, GridConfig
 from mrslam_core.exploration.explorer import Explorer
 from mrslam_core.exploration.grid import OccupancyGrid as Grid
@@ -66,10 +68,11 @@ class ExploreNodeConfig:
     pose_timeout: float = 2.0
     scan_queue: int = 10
     exploration: ExplorationConfig = field(default_factory=ExplorationConfig)
+    control: ControlConfig = field(default_factory=ControlConfig)
     grid: GridConfig = field(default_factory=GridConfig)
 
 
-#: the explorer's counters the node logs as they grow: (attribute, as a warning, what happened)
+#: the controller's counters (Controller.counters) the node logs as they grow: (name, as a warning, what happened)
 EVENTS = (
     ("stalls", True, "a robot stalled (commanded forward, did not move): backing off; stalls"),
     ("boxed_in", True, "a robot can reach no frontier from where it stands: recovering; times"),
@@ -88,7 +91,7 @@ class ExploreNode(Node):
         declare_config(self, ExploreNodeConfig())
         self.cfg = read_config(self, ExploreNodeConfig)
         self.grid = Grid(self.cfg.grid)
-        self.explorer = Explorer(self.cfg.exploration, list(self.cfg.robots))
+        self.explorer = Explorer(self.cfg.exploration, list(self.cfg.robots), Controller(self.cfg.control))
         self.poses: dict[str, np.ndarray] = {}
         self.pose_stamps: dict[str, int] = {}
         self.drops: Counter[str] = Counter()
@@ -136,19 +139,19 @@ class ExploreNode(Node):
     def control(self) -> None:
         if len(self.poses) < len(self.cfg.robots):
             return  # every robot must have a pose before targets are shared out
-        ex = self.explorer
-        before = {attr: getattr(ex, attr) for attr in ("held", *(e[0] for e in EVENTS))}
-        commands = ex.step(self.grid, self.poses, self.now_ns * 1e-9)
-        for attr, warn, what in EVENTS:
-            if getattr(ex, attr) > before[attr]:
-                msg = f"{what}: {getattr(ex, attr)} so far"
+        before = self.explorer.controller.counters()
+        commands = self.explorer.step(self.grid, self.poses, self.now_ns * 1e-9)
+        after = self.explorer.controller.counters()
+        for name, warn, what in EVENTS:
+            if after[name] > before[name]:
+                msg = f"{what}: {after[name]} so far"
                 # one call site per severity: rclpy refuses a site whose severity changes
                 if warn:
                     self.get_logger().warning(msg)
                 else:
                     self.get_logger().info(msg)
-        if ex.held > before["held"]:
-            self.get_logger().info(f"a robot waits for another in its way (keep_clear); {ex.held} commands held so far",
+        if after["held"] > before["held"]:
+            self.get_logger().info(f"a robot waits for another in its way (keep_clear); {after['held']} commands held so far",
                                    throttle_duration_sec=5.0)
         clock_ns = self.get_clock().now().nanoseconds
         for robot, (v, w) in commands.items():

@@ -18,8 +18,8 @@ import numpy as np
 from mrslam_core.datasets.synthetic import SyntheticWorld, SyntheticWorldConfig
 from mrslam_core.experiments._output import write_tables
 from mrslam_core.exploration.config import ExplorationConfig
-from mrslam_core.exploration.sim2d import TeamSim2D
 from mrslam_core.geometry.se2 import wrap_angle
+from mrslam_core.pipelines.sim2d import TeamSim2D
 from mrslam_core.sim.world import load_world
 from mrslam_core.slam.config import FilterConfig
 from mrslam_core.slam.filter import MultiRobotFastSLAM

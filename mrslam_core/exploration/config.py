@@ -49,7 +49,8 @@ class GridConfig:
 
 @dataclass(frozen=True)
 class ExplorationConfig:
-    """Frontier exploration (002 section V after Burgard et al. 2005).
+    """Frontier exploration (002 section V after Burgard et al. 2005): targets, paths, progress.
+    How the robots follow their paths is :class:`~mrslam_core.control.config.ControlConfig`'s.
 
     Attributes:
         coordinated: discount the utility of targets near already assigned ones (eq. 8–9);
@@ -84,15 +85,13 @@ class ExplorationConfig:
         replan_period: re-assign targets at least this often [s].
         replan_new_area: re-assign sooner (at most once a second) when this much new area has
             been mapped since the last assignment [m²].
-        progress_timeout: a goal with no progress for this long is blacklisted [s].
+        progress_timeout: a goal with no progress for this long is blacklisted, and the robot
+            recovers (``ControlConfig.recovery_time``) [s].
         blacklist_radius: frontier cells within this of a blacklisted goal are skipped [m].
-        blacklist_period: a failed goal is skipped for this long, then tried again [s].
+        blacklist_period: a failed goal is skipped for this long, then tried again; a bumper
+            hit (``ControlConfig.stall_time``) is an obstacle for as long [s].
         max_strikes: after this many failures at one place it is skipped for good.
-        recovery_time, recovery_speed: a robot that made no headway backs up this long at this
-            speed before its next goal (a wedged robot frees itself) [s, m/s].
         return_to_start: drive back to the start pose once exploration is complete.
-        max_speed, max_turn_rate: path follower limits [m/s, rad/s].
-        lookahead: pure-pursuit lookahead distance [m].
         unknown_passable: paths and travel costs may cross cells never observed (right for a
             sensor that sees every obstacle before the robot reaches it). False: only cells
             observed free (for stereo cameras, which cannot see a wall nearer than their near
@@ -101,51 +100,15 @@ class ExplorationConfig:
             this many times a step into an observed one (>= 1; 1: no difference): paths keep to
             space seen free where the detour is short, instead of cutting across the unseen
             ground beside the robot, where a stereo camera looking ahead has not seen the wall.
-        stall_time: a robot commanded forward for this long (at 0.1 m/s or more on average) that
-            covered less than a quarter of the commanded distance is blocked by something its
-            sensor does not show (a wall nearer than a stereo camera's near limit, a door frame
-            beside it): its goal fails and it backs off at once instead of pushing for
-            ``progress_timeout``, and a disc of radius ``bumper_range / 2`` around the spot
-            ``bumper_range`` ahead of it is an obstacle (inflated by ``robot_radius``) for
-            planning during ``blacklist_period`` (0: off) [s].
-        bumper_range: distance from the robot's centre to the front of its body [m].
-        keep_arc: where the pure-pursuit arc is tighter than ``max_speed / max_turn_rate``,
-            slow down to drive it instead of clipping the turn rate and swinging wide (see
-            :func:`~mrslam_core.exploration.planning.pure_pursuit`; measured in docs/results.md:
-            fewer collisions with door frames but less area explored at first; later, on in the
-            team defaults: more explored and no robot lost over 9 fresh seeds).
-        keep_clear: distance [m] between robot centres (base_link) that robots keep from each
-            other: a robot's path keeps this far from the other robots' positions where there is
-            room, and a robot does not drive forward (backward) while another robot's centre is
-            within it in front of (behind) its axle; it turns on the spot, waits, or is given a
-            path around. Two robots whose bodies swing out to ``r`` when turning need more than
-            2·r between centres to turn freely (0: off).
         path_clearance: a robot's path keeps this far [m] from the other robots' positions
-            where there is room (else the plain path is kept), without ``keep_clear``'s holding.
+            where there is room (else the plain path is kept), without the holding of
+            ``ControlConfig.keep_clear``.
             The occupancy grid leaves teammates out (``GridConfig.teammate_radius``); without
             this, paths ran through them: two robots crossing at the start drove into each other
             and stood wedged for the rest of the run (docs/results.md). Measured
             there at 0.8 m over 14 fresh closed-loop seeds: no wedge and more explored (65
             against 56 %), but more robots above 0.10 m (9 of 42 against 4 of 42), so off.
-            The larger of this and ``keep_clear`` is used; 0: off.
-        open_side_turns: a turn on the spot of more than 120° goes the long way round when
-            the short way sweeps the robot's heading past an occupied cell nearer than 0.6 m
-            and the long way does not come as near (0.2 m further or more): a stereo camera
-            facing a wall nearer than its near limit sees nothing, and a robot that turned blind
-            beside a wall came out 5-7° off in the recorded demos traced. On in the team defaults:
-            lower ATE, less explored (docs/results.md).
-        turn_clearance: before a turn on the spot whose headings come nearer than this [m] to an
-            occupied cell (rays from the robot's centre), the robot first backs straight away,
-            up to 0.4 m and only where the space behind is free, until they no longer do; a
-            turn already begun is not checked again (0: off). The cameras sit 0.12 m ahead of the
-            axle and the stereo near limit is 0.21 m from them, so a turn nearer than 0.33 m to
-            a wall is blind; counted as ``turn_backoffs``. On in the team defaults at 0.6 m: with
-            ``turn_stall_time``, 2 of 78 robots above 0.10 m over 26 closed-loop seeds against 7
-            of 78 without (docs/results.md).
-        turn_stall_time: a robot turning on the spot whose heading moved less than 5° in this
-            long is against something (a door jamb, a teammate: its body's corners swing out to
-            0.33 m from its axle) and turns the other way round instead, once per turn; counted as
-            ``blocked_turns`` (0: off) [s].
+            The larger of this and ``ControlConfig.keep_clear`` is used; 0: off.
         start_delay: each robot stands still this long from its first pose on, so that the map
             is started from the known start poses: before a robot's first landmarks nothing can
             tell its particles' motion noise apart, and the landmarks it maps first fix the
@@ -170,27 +133,13 @@ class ExplorationConfig:
     progress_timeout: float = 8.0
     blacklist_radius: float = 0.5
     blacklist_period: float = 30.0
-    recovery_time: float = 2.0
-    recovery_speed: float = 0.15
     max_strikes: int = 3
     return_to_start: bool = False
-    max_speed: float = 0.5
-    max_turn_rate: float = 1.2
-    lookahead: float = 0.4
     unknown_passable: bool = True
     unknown_cost: float = 1.0
-    stall_time: float = 0.0
-    bumper_range: float = 0.3
-    keep_arc: bool = False
-    keep_clear: float = 0.0
     path_clearance: float = 0.0
-    open_side_turns: bool = False
-    turn_clearance: float = 0.0
-    turn_stall_time: float = 1.5
     start_delay: float = 0.0
 
     def __post_init__(self) -> None:
         if not self.unknown_cost >= 1.0:
             raise ValueError("unknown_cost must be >= 1")
-        if not self.turn_clearance >= 0.0:
-            raise ValueError("turn_clearance must be >= 0")

@@ -18,6 +18,8 @@ from pathlib import Path
 import numpy as np
 
 from mrslam_core.configio import ConfigError, load_yaml, positive_int, profile_section
+from mrslam_core.control.config import ControlConfig
+from mrslam_core.control.controller import Controller
 from mrslam_core.evaluation.report import write_run
 from mrslam_core.exploration.config import ExplorationConfig, GridConfig
 from mrslam_core.exploration.coverage import explored_fraction
@@ -34,7 +36,7 @@ from mrslam_core.sim.simulation import Simulation
 from mrslam_core.slam.config import FilterConfig
 
 
-#: the simulated team profile (in configio.PROFILES): TeamConfig's frontend, filter and exploration defaults
+#: the simulated team profile (in configio.PROFILES): TeamConfig's frontend, filter, exploration and control defaults
 TEAM_PROFILE = "sim_team.yaml"
 
 
@@ -49,7 +51,7 @@ class TeamConfig:
         explore: send the robots to frontiers (else they stand still).
         map_check: the central mapper's check of each robot against the older map (also the
             demo's central node's).
-        frontend, filter, exploration: by default the simulated team profile
+        frontend, filter, exploration, control: by default the simulated team profile
             (config/sim_team.yaml).
     """
 
@@ -62,6 +64,7 @@ class TeamConfig:
     filter: FilterConfig = field(default_factory=lambda: profile_section(FilterConfig, TEAM_PROFILE, "filter"))
     map_check: MapCheckConfig = field(default_factory=MapCheckConfig)
     exploration: ExplorationConfig = field(default_factory=lambda: profile_section(ExplorationConfig, TEAM_PROFILE, "exploration"))
+    control: ControlConfig = field(default_factory=lambda: profile_section(ControlConfig, TEAM_PROFILE, "control"))
     grid: GridConfig = field(default_factory=GridConfig)
 
     def __post_init__(self) -> None:
@@ -82,7 +85,7 @@ def run(cfg: TeamConfig, progress: bool = False) -> dict:
                                          map_check=cfg.map_check, filter=cfg.filter))
     slam = mapper.slam
     grid = OccupancyGrid(cfg.grid)
-    explorer = Explorer(cfg.exploration, names)
+    explorer = Explorer(cfg.exploration, names, Controller(cfg.control))
     odom0 = {n: sim.odometry(n)[0] for n in names}
     at_frame = dict(odom0)  # each robot's odometry at its previous frame: the frontend's motion prior
     for n in names:
@@ -137,9 +140,7 @@ def run(cfg: TeamConfig, progress: bool = False) -> dict:
         "trajectories": trajectories, "update_ms": np.array(mapper.update_ms), "landmarks": {"mean": mean, "cov": cov},
         "dropped": dict(slam.dropped) | dict(mapper.drops), "map_checks": dict(mapper.map_checks),
         "relocalizations": mapper.relocalizations, "frontend_drops": {n: dict(f.drops) for n, f in frontends.items()},
-        "explored_fraction": explored, "exploration_state": explorer.state.value, "stalls": explorer.stalls, "held": explorer.held,
-        "boxed_in": explorer.boxed_in, "long_turns": explorer.long_turns,
-        "turn_backoffs": explorer.turn_backoffs, "blocked_turns": explorer.blocked_turns,
+        "explored_fraction": explored, "exploration_state": explorer.state.value, **explorer.controller.counters(),
         "wall_s": time.perf_counter() - wall, "outlier_matches": slam.outlier_pairs / slam.num_particles,
         "occupancy": {"probability": grid.probability(), "known": grid.observed.copy(), "origin": grid.origin,
                       "resolution": grid.res, "free_thresh": cfg.grid.free_below,

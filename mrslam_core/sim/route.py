@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from mrslam_core.exploration.planning import pure_pursuit
+from mrslam_core.control.pursuit import pure_pursuit
 from mrslam_core.sim.config import RouteConfig
 
 

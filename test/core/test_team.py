@@ -35,7 +35,7 @@ def test_team_defaults_suit_the_5hz_stereo_frontend():
     # turning at max_turn_rate moves the image f·ω/rate px per frame; tracks must survive it
     cfg = TeamConfig()
     f = cfg.sim.camera.width / (2 * np.tan(np.radians(cfg.sim.camera.hfov_deg) / 2))
-    per_frame = f * cfg.exploration.max_turn_rate / cfg.sim.camera.rate_hz
+    per_frame = f * cfg.control.platform.max_turn_rate / cfg.sim.camera.rate_hz
     assert per_frame < cfg.frontend.track_radius_px
     assert cfg.exploration.robot_radius > 0.33  # the body's corners are 0.33 m from base_link
     assert cfg.filter.association.descriptor_gate <= 0.25

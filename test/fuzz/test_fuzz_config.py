@@ -2,7 +2,7 @@
 wrong-typed keys at any depth give a ConfigError that names the dotted key; a config without
 optional keys is the default; arbitrary YAML text never raises anything but ConfigError.
 
-Configs: the team pipeline's (sim, frontend, filter, exploration, grid sections), MR.CLAM's
+Configs: the team pipeline's (sim, frontend, filter, exploration, control, grid sections), MR.CLAM's
 (config/mrclam.yaml) and the launcher's (config/launch_sim2.yaml: a list of node specs with
 required keys).
 """
@@ -232,7 +232,9 @@ def test_a_key_left_out_of_a_section_keeps_the_parents_default(case, pick):
 
 
 def test_a_partial_team_filter_section_keeps_the_team_filter():
-    cfg = from_dict(TeamConfig, {"filter": {"seed": 7}, "exploration": {"stall_time": 0.0}})
-    assert cfg.filter.seed == 7 and cfg.exploration.stall_time == 0.0
+    cfg = from_dict(TeamConfig, {"filter": {"seed": 7}, "control": {"stall_time": 1.0, "platform": {"rear": 0.2}}})
+    assert cfg.filter.seed == 7 and cfg.control.stall_time == 1.0 and cfg.control.platform.rear == 0.2
     assert cfg.filter == dataclasses.replace(TeamConfig().filter, seed=7)  # not FilterConfig(seed=7)
-    assert cfg.exploration == dataclasses.replace(TeamConfig().exploration, stall_time=0.0)
+    team = TeamConfig().control  # the team profile's platform speeds stay
+    platform = dataclasses.replace(team.platform, rear=0.2)
+    assert cfg.control == dataclasses.replace(team, stall_time=1.0, platform=platform)

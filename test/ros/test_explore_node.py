@@ -110,18 +110,20 @@ def test_the_node_logs_counters_of_either_severity_as_they_grow():
         node = ExploreNode()
         node.on_pose("robot1", pose_with_covariance(np.array([5.0, 5.0, 0.0]), np.eye(3) * 1e-4, 1, "map"))
         grown = []
+        counts = node.explorer.controller.counters()
+        node.explorer.controller.counters = lambda: dict(counts)
 
         def step(grid, poses, now):
-            attr = EVENTS[len(grown) % len(EVENTS)][0]
-            setattr(node.explorer, attr, getattr(node.explorer, attr) + 1)
-            grown.append(attr)
+            name = EVENTS[len(grown) % len(EVENTS)][0]
+            counts[name] += 1
+            grown.append(name)
             return {}
 
         node.explorer.step = step
         for _ in range(2 * len(EVENTS)):
             node.control()
-        assert {warn for attr, warn, _ in EVENTS if attr in grown} == {True, False}
-        assert all(getattr(node.explorer, attr) == 2 for attr, _, _ in EVENTS)
+        assert {warn for name, warn, _ in EVENTS if name in grown} == {True, False}
+        assert all(counts[name] == 2 for name, _, _ in EVENTS)
     finally:
         rclpy.shutdown()
 

@@ -1,17 +1,21 @@
 """Exploration: value-iteration cost against the paper's update rule, frontiers, assignment,
-A*, the occupancy grid, and a seeded 2D run that explores and stops."""
+A*, the occupancy grid, the explorer with its controller, and a seeded 2D run that explores and
+stops."""
 
 import numpy as np
 import pytest
 
+from mrslam_core.control.config import ControlConfig
+from mrslam_core.control.controller import Controller
+from mrslam_core.control.platform import PlatformConfig
 from mrslam_core.exploration.assignment import assign_targets
 from mrslam_core.exploration.config import ExplorationConfig, GridConfig
 from mrslam_core.exploration.cost import travel_cost, value_iteration_reference
 from mrslam_core.exploration.explorer import State
 from mrslam_core.exploration.frontiers import frontier_cells, frontier_groups
 from mrslam_core.exploration.grid import OccupancyGrid, Scan
-from mrslam_core.exploration.planning import astar, pure_pursuit
-from mrslam_core.exploration.sim2d import TeamSim2D
+from mrslam_core.exploration.planning import astar
+from mrslam_core.pipelines.sim2d import TeamSim2D
 from mrslam_core.sim.world import load_world
 
 
@@ -165,33 +169,6 @@ def test_a_hit_on_a_teammate_marks_no_obstacle_but_proves_the_space_before_it_fr
     assert beams.without_hits_near(pose, np.zeros((0, 2)), 0.45) is beams
 
 
-def test_pure_pursuit_turns_towards_the_path():
-    v, w, _ = pure_pursuit(np.array([0.0, 0.0, 0.0]), np.array([[0.0, 0.0], [1.0, 1.0]]), 0.5, 0.5, 1.0)
-    assert v > 0 and w > 0
-    v, w, _ = pure_pursuit(np.array([0.0, 0.0, 0.0]), np.array([[0.0, 0.0], [-1.0, 0.0]]), 0.5, 0.5, 1.0)
-    assert v == 0 and w != 0  # target behind: turn on the spot
-
-
-def test_pure_pursuit_with_keep_arc_drives_the_arc_it_aims_at_when_the_turn_rate_saturates():
-    """Into a 90° corner (a door off a corridor) at 0.35 m/s with 0.5 rad/s at most: with
-    ``keep_arc`` the speed drops so the commanded arc is the pure-pursuit arc; clipping the turn
-    rate alone swings the robot 0.157 m off the path (0.7 m turning radius)."""
-    path = np.vstack([np.column_stack([np.arange(0.0, 2.0, 0.05), np.zeros(40)]),
-                      np.column_stack([np.full(41, 2.0), np.arange(0.0, 2.05, 0.05)])])
-    worst = {}
-    for keep in (True, False):
-        pose, worst[keep], dt = np.zeros(3), 0.0, 0.05
-        for _ in range(600):
-            v, w, _ = pure_pursuit(pose, path, 0.4, 0.35, 0.5, keep_arc=keep)
-            assert abs(w) <= 0.5 + 1e-12 and 0.0 <= v <= 0.35
-            pose = pose + dt * np.array([v * np.cos(pose[2]), v * np.sin(pose[2]), w])
-            worst[keep] = max(worst[keep], float(np.linalg.norm(path - pose[:2], axis=1).min()))
-            if np.linalg.norm(pose[:2] - path[-1]) < 0.1:
-                break
-        assert np.linalg.norm(pose[:2] - path[-1]) < 0.1
-    assert worst[True] < 0.12 and worst[False] > 0.15, worst
-
-
 def test_seeded_run_explores_small_world_and_stops():
     sim = TeamSim2D(load_world("small"), 2, ExplorationConfig(return_to_start=True), seed=3)
     curve = sim.run(300, stop_at=2.0)  # never stopped by coverage: only by the explorer
@@ -260,24 +237,25 @@ def test_a_stalled_robot_marks_a_bumper_hit_backs_off_and_plans_around_it():
     from mrslam_core.exploration.explorer import Explorer, planning_layers
 
     grid = _open_room()
-    cfg = ExplorationConfig(robot_radius=0.2, stall_time=1.5, bumper_range=0.3, min_target_distance=0.5)
-    ex = Explorer(cfg, ["r"])
+    cfg = ExplorationConfig(robot_radius=0.2, min_target_distance=0.5)
+    ctl = ControlConfig(stall_time=1.5, platform=PlatformConfig(bumper_range=0.3))
+    ex = Explorer(cfg, ["r"], Controller(ctl))
     pose = np.array([0.5, 2.0, 0.0])
     cmds = [ex.step(grid, {"r": pose}, 0.2 * i)["r"] for i in range(9)]  # 0 … 1.6 s
     assert all(v > 0.1 for v, _ in cmds[:8]), cmds
-    assert cmds[8] == (-cfg.recovery_speed, 0.0)  # stalled at 1.6 s (> 1.5 s commanded): backs off
-    assert len(ex.bumps) == 1 and ex.strikes[0][0] == 1
+    assert cmds[8] == (-ctl.recovery_speed, 0.0)  # stalled at 1.6 s (> 1.5 s commanded): backs off
+    assert len(ex.bumps) == 1 and ex.strikes[0][0] == 1 and ex.controller.recovery.stalls == 1
     np.testing.assert_allclose(ex.bumps[0], [0.8, 2.0])
-    passable, prob = planning_layers(grid, [pose], cfg, ex.bumps)
+    passable, prob = planning_layers(grid, [pose], cfg, ex.bumps, 0.15)
     assert not passable[grid.cell_of(np.array([0.8, 2.0]))[0], 8] and prob[20, 8] == 1.0
     t = 0.2 * 9
-    while t < cfg.recovery_time + 2.0:
+    while t < ctl.recovery_time + 2.0:
         ex.step(grid, {"r": pose}, t)
         t += 0.2
     goal = ex.goals["r"]
     assert goal is not None
     d = np.linalg.norm(goal.path - ex.bumps[0], axis=1)
-    assert d.min() >= cfg.bumper_range / 2, d.min()  # round the bumper hit, not through it
+    assert d.min() >= 0.15, d.min()  # round the bumper hit (bumper_range / 2), not through it
     ex.step(grid, {"r": pose}, 1.6 + cfg.blacklist_period)
     assert ex.bumps == []
 
@@ -288,18 +266,19 @@ def test_a_robot_that_could_not_back_off_pulls_forward_next_time():
     recovers forward, then backward again. A robot that did move while backing off backs off."""
     from mrslam_core.exploration.explorer import Explorer
 
-    cfg = ExplorationConfig(robot_radius=0.2, min_target_distance=0.5, progress_timeout=2.0, recovery_time=1.0)
+    cfg = ExplorationConfig(robot_radius=0.2, min_target_distance=0.5, progress_timeout=2.0)
+    ctl = ControlConfig(recovery_time=1.0)
 
     def recoveries(moves_when_backing: bool) -> list[float]:
         """The sign of v at the start of each of the first three recoveries."""
-        ex = Explorer(cfg, ["r"])
+        ex = Explorer(cfg, ["r"], Controller(ctl))
         pose = np.array([0.5, 2.0, 0.0])
         signs, t = [], 0.0
         while len(signs) < 3 and t < 30.0:
-            started = ex.recovering_until.get("r")
+            started = ex.controller.recovery.until.get("r")
             v, w = ex.step(_open_room(), {"r": pose.copy()}, t)["r"]
-            if ex.recovering_until.get("r") != started:
-                assert abs(v) == cfg.recovery_speed and w == 0.0
+            if ex.controller.recovery.until.get("r") != started:
+                assert abs(v) == ctl.recovery_speed and w == 0.0
                 signs.append(float(np.sign(v)))
             if v < 0 and moves_when_backing:
                 pose[0] += v * 0.2
@@ -324,9 +303,9 @@ def test_a_boxed_in_robot_recovers_and_blacklists_no_target():
     ex = Explorer(cfg, ["robot1", "robot2"])
     poses = {"robot1": np.array([1.05, 2.05, 0.0]), "robot2": np.array([2.5, 3.0, 0.0])}
     cmds = ex.step(grid, poses, 0.0)
-    assert ex.boxed_in == 1 and ex.blacklist == [] and ex.strikes == []
+    assert ex.controller.recovery.boxed_in == 1 and ex.blacklist == [] and ex.strikes == []
     assert ex.goals["robot1"] is None and ex.goals["robot2"].target[0] == pytest.approx(3.95)
-    assert cmds["robot1"] == (-cfg.recovery_speed, 0.0) and cmds["robot2"] != (0.0, 0.0)
+    assert cmds["robot1"] == (-ControlConfig().recovery_speed, 0.0) and cmds["robot2"] != (0.0, 0.0)
 
 
 def test_reaches_any_follows_the_region_that_holds_the_start():
@@ -349,7 +328,8 @@ def test_a_robot_that_follows_its_commands_never_stalls():
     from mrslam_core.exploration.explorer import Explorer
 
     grid = _open_room()
-    ex = Explorer(ExplorationConfig(robot_radius=0.2, min_target_distance=0.5, stall_time=1.5), ["r"])
+    ex = Explorer(ExplorationConfig(robot_radius=0.2, min_target_distance=0.5), ["r"],
+                  Controller(ControlConfig(stall_time=1.5)))
     pose = np.array([0.5, 2.0, 0.0])
     for i in range(40):
         v, w = ex.step(grid, {"r": pose}, 0.2 * i)["r"]
@@ -366,9 +346,8 @@ def test_a_path_keeps_clear_of_another_robot_where_there_is_room(keep_clear, pat
     from mrslam_core.exploration.explorer import Explorer, planning_layers
 
     grid = _open_room()
-    cfg = ExplorationConfig(robot_radius=0.2, min_target_distance=0.5, keep_clear=keep_clear,
-                            path_clearance=path_clearance)
-    ex = Explorer(cfg, ["robot1", "robot2"])
+    cfg = ExplorationConfig(robot_radius=0.2, min_target_distance=0.5, path_clearance=path_clearance)
+    ex = Explorer(cfg, ["robot1", "robot2"], Controller(ControlConfig(keep_clear=keep_clear)))
     poses = {"robot1": np.array([0.5, 2.0, 0.0]), "robot2": np.array([2.0, 2.0, np.pi / 2])}
     passable, _ = planning_layers(grid, list(poses.values()), cfg)
     ex._set_goal("robot1", np.array([3.95, 2.05]), grid, passable, poses, 0.0, np.array([[3.95, 2.05]]))
@@ -387,8 +366,8 @@ def test_a_path_through_another_robot_is_kept_when_there_is_no_room_around_it():
     grid = OccupancyGrid(GridConfig(resolution=0.1), extent=((0.0, 0.0), (6.0, 4.0)))
     grid.observed[15:25, :] = True
     grid.logodds[15:25, :] = -3.0
-    cfg = ExplorationConfig(robot_radius=0.2, keep_clear=0.9)
-    ex = Explorer(cfg, ["robot1", "robot2"])
+    cfg = ExplorationConfig(robot_radius=0.2)
+    ex = Explorer(cfg, ["robot1", "robot2"], Controller(ControlConfig(keep_clear=0.9)))
     poses = {"robot1": np.array([0.5, 2.0, 0.0]), "robot2": np.array([2.0, 2.0, 0.0])}
     passable, _ = planning_layers(grid, list(poses.values()), cfg)
     ex._set_goal("robot1", np.array([5.0, 2.0]), grid, passable, poses, 0.0, np.array([[5.0, 2.0]]))
@@ -399,23 +378,20 @@ def test_the_follower_holds_a_robot_that_would_drive_into_another():
     """robot1 at (0.5, 2.0) facing east is given a straight path to the frontier while robot2 is
     far away; 0.2 s later robot2 stands 0.6 m in front of it: robot1 gets v = 0 (it may still
     turn). robot2 0.6 m behind or 0.8 m beside it: robot1 drives on. Off (keep_clear = 0): robot1
-    drives into robot2. A backing-up robot is held by a robot behind it."""
-    from mrslam_core.exploration.explorer import Explorer, ahead_within
+    drives into robot2."""
+    from mrslam_core.exploration.explorer import Explorer
 
     grid = _open_room()
     me = np.array([0.5, 2.0, 0.0])
     for keep_clear, other, moves in [(0.9, [1.1, 2.0], False), (0.9, [-0.1, 2.0], True),
                                      (0.9, [0.5, 2.8], True), (0.0, [1.1, 2.0], True)]:
-        ex = Explorer(ExplorationConfig(robot_radius=0.2, min_target_distance=0.5, keep_clear=keep_clear),
-                      ["robot1", "robot2"])
+        ex = Explorer(ExplorationConfig(robot_radius=0.2, min_target_distance=0.5), ["robot1", "robot2"],
+                      Controller(ControlConfig(keep_clear=keep_clear)))
         v, _ = ex.step(grid, {"robot1": me, "robot2": np.array([0.3, 3.8, 0.0])}, 0.0)["robot1"]
         assert v > 0.05
         v, _ = ex.step(grid, {"robot1": me, "robot2": np.array([*other, np.pi])}, 0.2)["robot1"]
         assert (v > 0.05) == moves, (keep_clear, other, v)
-        assert ex.held == (0 if moves else 1)
-    assert ahead_within(me, [np.array([0.0, 2.0])], 0.9, direction=-1.0)
-    assert not ahead_within(me, [np.array([0.0, 2.0])], 0.9, direction=1.0)
-    assert not ahead_within(me, [np.array([1.5, 2.0])], 0.9, direction=1.0)
+        assert ex.controller.held == (0 if moves else 1)
 
 
 def test_robots_stand_still_at_the_start_for_start_delay():
@@ -475,82 +451,25 @@ def _wall_south() -> OccupancyGrid:
     return grid
 
 
-def test_sweep_clearance_is_the_nearest_occupied_cell_the_turn_looks_at():
-    """From (2, 1.02) facing east, turning right by 90° looks straight at the wall 0.32 m south:
-    the first sample inside its cells is 0.35 m out (samples every 0.05 m); turning left sees
-    nothing within 1 m; a turn of 30° right meets the wall 0.32 / sin 30° = 0.64 m out (sample
-    0.65 m)."""
-    from mrslam_core.exploration.explorer import sweep_clearance
-
-    grid = _wall_south()
-    pose = np.array([2.0, 1.02, 0.0])
-    occ = grid.occupied()
-    assert sweep_clearance(grid, occ, pose, -np.pi / 2, 1.0) == pytest.approx(0.35)
-    assert sweep_clearance(grid, occ, pose, np.pi / 2, 1.0) == 1.0
-    assert sweep_clearance(grid, occ, pose, -np.radians(30), 1.0) == pytest.approx(0.65)
-
-
-def test_a_turn_on_the_spot_beside_a_wall_goes_round_the_open_side():
-    """A robot 0.3 m north of a wall, facing west-south-west (-150°), must turn 150° to face its
-    aim due east. The short way (left, through south) sweeps the camera across the wall, so it
-    turns right, through north; it keeps turning right where the aim is 170° to its left, and
-    drives once the aim is ahead. Without the wall, or for a turn of 120° or less, the short way."""
-    from mrslam_core.exploration.explorer import Explorer
-
-    rate = 0.5
-    ex = Explorer(ExplorationConfig(max_turn_rate=rate, open_side_turns=True), ["r"])
-    grid, aim = _wall_south(), np.array([3.0, 1.0])
-    pose = np.array([2.0, 1.0, np.radians(-150.0)])
-    assert ex._turn_side("r", grid, pose, aim, 0.0, rate) == -rate and ex.long_turns == 1
-    pose[2] = np.radians(-170.0)  # turned 20° right: the aim is now 170° to the left
-    assert ex._turn_side("r", grid, pose, aim, 0.0, rate) == -rate
-    pose[2] = np.radians(40.0)  # 2·40° > rate: still clipped
-    assert ex._turn_side("r", grid, pose, aim, 0.0, -rate) == -rate
-    assert ex._turn_side("r", grid, pose, aim, 0.2, -0.1) == -0.1 and ex.spin == {}  # driving: as pure pursuit says
-    free = _wall_south()
-    free.logodds[6, :] = -3.0
-    ex = Explorer(ExplorationConfig(max_turn_rate=rate, open_side_turns=True), ["r"])
-    assert ex._turn_side("r", free, np.array([2.0, 1.0, np.radians(-150.0)]), aim, 0.0, rate) == rate
-    assert ex._turn_side("r", grid, np.array([2.0, 1.0, np.radians(-115.0)]), aim, 0.0, rate) == rate
-    assert ex.long_turns == 0
-
-
-def test_a_robot_facing_a_wall_backs_away_only_as_far_as_the_room_behind_allows():
-    """From (2, 1.02) facing the wall 0.32 m south, a turn right by 90° sweeps its heading within
-    0.35 m of the wall (first sample inside its cells, rays every 10° from −100°). With
-    ``turn_clearance`` 0.6 m it backs 0.3 m: the −100° ray then meets the wall 0.63 m out, the first
-    sample there at 0.65 m, beyond 0.6 m. With a wall 0.58 m behind it (room 0.6 − 0.365 m), only
-    0.2 m, which gains 0.2 m; with a wall 0.28 m behind, not at all; with the turn clear, not at all."""
-    from mrslam_core.exploration.explorer import Explorer
-
-    ex = Explorer(ExplorationConfig(turn_clearance=0.6), ["r"])
-    pose = np.array([2.0, 1.02, -np.pi / 2])
-    assert ex._backoff(_wall_south(), pose, -np.pi / 2) == pytest.approx(0.3)
-    behind = _wall_south()
-    behind.logodds[16, :] = 3.0  # cells y 1.6-1.7
-    assert ex._backoff(behind, pose, -np.pi / 2) == pytest.approx(0.2)
-    behind.logodds[13, :] = 3.0  # cells y 1.3-1.4
-    assert ex._backoff(behind, pose, -np.pi / 2) == 0.0
-    assert ex._backoff(_wall_south(), np.array([2.0, 1.02, np.pi / 2]), np.pi / 2) == 0.0
-
-
 def test_the_follower_backs_away_then_turns_without_checking_again():
     """A robot facing the wall whose path leads north: it backs at ``recovery_speed`` (counted
     once), keeps backing until 0.3 m from where it began, then turns on the spot."""
     from mrslam_core.exploration.explorer import Explorer, Goal
 
-    cfg = ExplorationConfig(turn_clearance=0.6, max_turn_rate=0.5)
-    ex = Explorer(cfg, ["r"])
+    slow = PlatformConfig(max_turn_rate=0.5)
+    cfg = ControlConfig(turn_clearance=0.6, platform=slow)
+    ex = Explorer(ExplorationConfig(), ["r"], Controller(cfg))
     ex.last_plan_s = 0.0
     grid = _wall_south()
     ex.goals["r"] = Goal(np.array([2.0, 3.0]), np.array([[2.0, 1.5], [2.0, 2.0], [2.0, 2.5], [2.0, 3.0]]), 0.0)
     assert ex.step(grid, {"r": np.array([2.0, 1.02, -np.pi / 2])}, 0.2) == {"r": (-cfg.recovery_speed, 0.0)}
     assert ex.step(grid, {"r": np.array([2.0, 1.22, -np.pi / 2])}, 0.4) == {"r": (-cfg.recovery_speed, 0.0)}
+    follower = ex.controller.follower
     v, w = ex.step(grid, {"r": np.array([2.0, 1.33, -np.pi / 2])}, 0.6)["r"]
-    assert v == 0.0 and abs(w) == 0.5 and ex.turn_backoffs == 1 and ex.backing == {}
+    assert v == 0.0 and abs(w) == 0.5 and follower.turn_backoffs == 1 and follower.backing == {}
     v, w = ex.step(grid, {"r": np.array([2.0, 1.33, -np.pi / 2 + 0.1])}, 0.8)["r"]
-    assert v == 0.0 and w == 0.5 and ex.turn_backoffs == 1
-    off = Explorer(ExplorationConfig(max_turn_rate=0.5), ["r"])
+    assert v == 0.0 and w == 0.5 and follower.turn_backoffs == 1
+    off = Explorer(ExplorationConfig(), ["r"], Controller(ControlConfig(platform=slow)))
     off.last_plan_s, off.goals["r"] = 0.0, ex.goals["r"]
     assert off.step(grid, {"r": np.array([2.0, 1.02, -np.pi / 2])}, 0.2)["r"][0] == 0.0
 
@@ -562,22 +481,23 @@ def test_a_turn_on_the_spot_that_does_not_turn_goes_the_other_way_round_once():
     A turn that moves is never reversed."""
     from mrslam_core.exploration.explorer import Explorer, Goal
 
-    cfg = ExplorationConfig(max_turn_rate=0.5)
+    cfg = ControlConfig(platform=PlatformConfig(max_turn_rate=0.5))
     path = np.array([[1.5, 2.5], [1.0, 3.0], [0.5, 3.5]])
     grid = _wall_south()
-    ex = Explorer(cfg, ["r"])
+    ex = Explorer(ExplorationConfig(), ["r"], Controller(cfg))
     ex.last_plan_s, ex.goals["r"] = 0.0, Goal(np.array([0.5, 3.5]), path, 0.0)
     ex.known_at_plan = int(grid.observed.sum())  # no re-assignment: the map does not grow
     stuck = {"r": np.array([2.0, 2.0, 0.0])}
     assert ex.step(grid, stuck, 0.2)["r"] == (0.0, 0.5)
     assert ex.step(grid, stuck, 1.6)["r"] == (0.0, 0.5)  # 1.4 s: not yet
-    assert ex.step(grid, stuck, 1.8)["r"] == (0.0, -0.5) and ex.blocked_turns == 1
+    assert ex.step(grid, stuck, 1.8)["r"] == (0.0, -0.5) and ex.controller.follower.blocked_turns == 1
     assert ex.step(grid, {"r": np.array([2.0, 2.0, -0.05])}, 2.0)["r"] == (0.0, -0.5)  # the long way
-    assert ex.step(grid, {"r": np.array([2.0, 2.0, -0.05])}, 3.4)["r"] == (0.0, -0.5) and ex.blocked_turns == 1
+    assert ex.step(grid, {"r": np.array([2.0, 2.0, -0.05])}, 3.4)["r"] == (0.0, -0.5)
+    assert ex.controller.follower.blocked_turns == 1
 
-    free = Explorer(cfg, ["r"])
+    free = Explorer(ExplorationConfig(), ["r"], Controller(cfg))
     free.last_plan_s, free.goals["r"] = 0.0, Goal(np.array([0.5, 3.5]), path, 0.0)
     free.known_at_plan = ex.known_at_plan
     for i, t in enumerate(np.arange(0.2, 3.0, 0.2)):
         assert free.step(grid, {"r": np.array([2.0, 2.0, 0.1 * i])}, t)["r"] == (0.0, 0.5)
-    assert free.blocked_turns == 0
+    assert free.controller.follower.blocked_turns == 0

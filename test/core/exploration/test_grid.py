@@ -12,7 +12,7 @@ from mrslam_core.exploration.config import ExplorationConfig, GridConfig
 from mrslam_core.exploration.coverage import explored_fraction
 from mrslam_core.exploration.explorer import Explorer
 from mrslam_core.exploration.grid import OccupancyGrid, Scan
-from mrslam_core.exploration.sim2d import SensorConfig, TeamSim2D
+from mrslam_core.pipelines.sim2d import SensorConfig, TeamSim2D
 from mrslam_core.sim.world import load_world
 
 

@@ -8,6 +8,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage
 
+from mrslam_core.control.config import ControlConfig
+from mrslam_core.control.controller import Controller
 from mrslam_core.exploration.config import ExplorationConfig, GridConfig
 from mrslam_core.exploration.explorer import Explorer, State
 from mrslam_core.exploration.grid import OccupancyGrid, Scan
@@ -26,10 +28,12 @@ class SensorConfig:
 
 
 class TeamSim2D:
-    """Robots on ``world``'s occupancy raster (resolution ``res``), exploring with ``explorer``."""
+    """Robots on ``world``'s occupancy raster (resolution ``res``), exploring with ``explorer``
+    (``explore``), driven by its controller (``control``)."""
 
     def __init__(self, world: World, robots: int, explore: ExplorationConfig, sensor: SensorConfig | None = None,
-                 res: float = 0.05, grid: GridConfig | None = None, seed: int = 0):
+                 res: float = 0.05, grid: GridConfig | None = None, seed: int = 0,
+                 control: ControlConfig | None = None):
         self.world = world
         self.res = res
         self.truth = world.occupancy(res)
@@ -40,7 +44,7 @@ class TeamSim2D:
         self.names = [f"robot{i + 1}" for i in range(robots)]
         self.poses = {n: starts[i].copy() for i, n in enumerate(self.names)}
         self.grid = OccupancyGrid(grid or GridConfig())
-        self.explorer = Explorer(explore, self.names)
+        self.explorer = Explorer(explore, self.names, Controller(control))
         body = ndimage.distance_transform_edt(~self.truth) * res <= 0.2
         lab, _ = ndimage.label(~body)
         start_cell = np.floor(starts[0, 1::-1] / res).astype(int)
