@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import re
 import sys
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -74,6 +75,9 @@ class ViewNodeConfig:
         ellipsoids: also stream the landmarks' covariance ellipsoids (the central node then
             builds its /slam/landmark_markers, up to its ``max_markers``).
         path_spacing: ground-truth path poses are kept this far apart at least [m].
+        path_period: a path (estimated, planned, ground truth) or particle cloud goes out at most
+            once in this long; the estimated paths come whole with every update, and decoding
+            them at the filter's rate would cost the view more than the rest together [s].
         discovery_period: how often the graph is searched for new robots (``robots`` empty) [s].
         watch_period: how often the subscriptions follow what the clients watch [s].
         static_period: how often /tf_static's transforms are sent again, for clients that
@@ -86,6 +90,7 @@ class ViewNodeConfig:
     map_frame: str = "map"
     ellipsoids: bool = False
     path_spacing: float = 0.02
+    path_period: float = 1.0
     discovery_period: float = 1.0
     watch_period: float = 0.2
     static_period: float = 1.0
@@ -103,6 +108,7 @@ class ViewNode(Node):
         self.diag = Diagnostics(self)
         self.robots: set[str] = set()
         self.truth_path: dict[str, list[tuple[int, np.ndarray]]] = {}
+        self._truth_sent: dict[str, float] = {}  # per robot, when its ground-truth path went out [s, monotonic]
         self.camera_info: dict[str, CameraInfo] = {}
         #: /tf_static: child frame -> (stamp [ns], parent, child, translation (3,), quaternion (4,))
         self.statics: dict[str, tuple] = {}
@@ -118,7 +124,8 @@ class ViewNode(Node):
         self._feed(PointCloud2, "/slam/landmarks", ("/slam/landmarks",),
                    lambda m: fv.point_cloud(cloud_to_observations(m, "map").z, stamp_to_ns(m.header.stamp), frame), send=True)
         self._feed(PoseArray, "/slam/particles", ("/slam/particles",),
-                   lambda m: fv.poses_in_frame(pose_array_to_poses(m), stamp_to_ns(m.header.stamp), frame), send=True)
+                   lambda m: fv.poses_in_frame(pose_array_to_poses(m), stamp_to_ns(m.header.stamp), frame), send=True,
+                   every=self.cfg.path_period)
         self._feed(MarkerArray, "/exploration/frontiers", ("/exploration/frontiers",), self._frontiers)
         if self.cfg.ellipsoids:
             self._feed(MarkerArray, "/slam/landmark_markers", ("/slam/landmark_ellipsoids",), self._ellipsoids)
@@ -132,12 +139,19 @@ class ViewNode(Node):
         self.create_timer(1.0, self.report, clock=steady)
 
     # ------------------------------------------------------------------ plumbing
-    def _feed(self, msg_type, topic: str, channels: tuple[str, ...], convert: Callable, send: bool = False) -> None:
+    def _feed(self, msg_type, topic: str, channels: tuple[str, ...], convert: Callable, send: bool = False,
+              every: float = 0.0) -> None:
         """Register ``topic``: while a client watches one of ``channels``, its messages are
-        deserialized and passed to ``convert``; with ``send`` what that returns goes out on
-        ``channels[0]`` stamped like the message (otherwise ``convert`` sends what it makes)."""
+        deserialized and passed to ``convert``, at most one in ``every`` seconds (the others are
+        skipped undecoded); with ``send`` what that returns goes out on ``channels[0]`` stamped
+        like the message (otherwise ``convert`` sends what it makes)."""
+        last = [-np.inf]
 
         def callback(data: bytes) -> None:
+            now = time.monotonic()
+            if now - last[0] < every:
+                return
+            last[0] = now
             try:
                 msg = deserialize_message(data, msg_type)
                 out = convert(msg)
@@ -170,11 +184,13 @@ class ViewNode(Node):
         self._feed(PoseWithCovarianceStamped, f"{ns}/pose", (f"{ns}/pose",),
                    lambda m: fv.pose_in_frame(msg_to_pose(m.pose.pose), stamp_to_ns(m.header.stamp), frame), send=True)
         self._feed(Path, f"{ns}/path", (f"{ns}/path",),
-                   lambda m: fv.poses_in_frame(path_to_poses(m)[0], stamp_to_ns(m.header.stamp), frame), send=True)
+                   lambda m: fv.poses_in_frame(path_to_poses(m)[0], stamp_to_ns(m.header.stamp), frame), send=True,
+                   every=self.cfg.path_period)
         self._feed(PoseStamped, f"{ns}/goal", (f"{ns}/goal",),
                    lambda m: fv.pose_in_frame(msg_to_pose(m.pose), stamp_to_ns(m.header.stamp), frame), send=True)
         self._feed(Path, f"{ns}/plan", (f"{ns}/plan",),
-                   lambda m: fv.poses_in_frame(path_to_poses(m)[0], stamp_to_ns(m.header.stamp), frame), send=True)
+                   lambda m: fv.poses_in_frame(path_to_poses(m)[0], stamp_to_ns(m.header.stamp), frame), send=True,
+                   every=self.cfg.path_period)
         camera = (f"{ns}/image", f"{ns}/image_points", f"{ns}/camera_calibration")
         self._feed(Image, f"{ns}/stereo/left/image_raw", camera[::2], lambda m, r=robot: self._image(r, m))
         self._feed(PointCloud2, f"{ns}/observations", camera[1:2], lambda m, r=robot: self._image_points(r, m))
@@ -254,9 +270,11 @@ class ViewNode(Node):
         frame = self.cfg.map_frame
         if self.server.wants(f"/{robot}/ground_truth"):
             self.server.log(f"/{robot}/ground_truth", fv.pose_in_frame(pose, stamp, frame), stamp)
-        if self.server.wants(f"/{robot}/ground_truth_path") and path[-1][0] == stamp:
-            poses = np.array([p for _, p in path])
-            self.server.log(f"/{robot}/ground_truth_path", fv.poses_in_frame(poses, stamp, frame), stamp)
+        channel = f"/{robot}/ground_truth_path"
+        now = time.monotonic()
+        if self.server.wants(channel) and now - self._truth_sent.get(robot, -np.inf) >= self.cfg.path_period:
+            self._truth_sent[robot] = now
+            self.server.log(channel, fv.poses_in_frame(np.array([p for _, p in path]), stamp, frame), stamp)
 
     def report(self) -> None:
         self.diag.mirror(self.server.client_errors, "client_", "bad client messages (ignored)")

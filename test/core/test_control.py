@@ -14,17 +14,6 @@ from mrslam_core.control.follower import Follower, sweep_clearance
 from mrslam_core.control.platform import PlatformConfig
 from mrslam_core.control.pursuit import pure_pursuit
 from mrslam_core.control.recovery import Recovery
-from mrslam_core.exploration.config import GridConfig
-from mrslam_core.exploration.grid import OccupancyGrid
-
-
-def _wall_south() -> OccupancyGrid:
-    """6 m × 4 m observed free, with a wall in the cells y 0.6–0.7 m along the whole width."""
-    grid = OccupancyGrid(GridConfig(resolution=0.1), extent=((0.0, 0.0), (6.0, 4.0)))
-    grid.observed[:] = True
-    grid.logodds[:] = -3.0
-    grid.logodds[6, :] = 3.0
-    return grid
 
 
 def test_pure_pursuit_drives_the_arc_through_the_lookahead_point():
@@ -65,22 +54,22 @@ def test_pure_pursuit_with_keep_arc_drives_the_arc_it_aims_at_when_the_turn_rate
     assert worst[True] < 0.12 and worst[False] > 0.15, worst
 
 
-def test_the_follower_drives_at_the_platforms_limits():
+def test_the_follower_drives_at_the_platforms_limits(wall_south):
     """The same path, two platforms: the follower's speed and turn rate are the platform's."""
     path = np.array([[0.0, 0.0], [0.15, 0.2], [0.3, 0.4]])
     slow = PlatformConfig(max_speed=0.25, max_turn_rate=0.5)
     for platform, want in ((PlatformConfig(), (0.3, 0.96)), (slow, (0.15, 0.48))):
         follower = Follower(ControlConfig(platform=platform))
-        v, w = follower.command("r", _wall_south(), np.array([2.0, 2.0, 0.0]), path + [2.0, 2.0], 0.0)
+        v, w = follower.command("r", wall_south(), np.array([2.0, 2.0, 0.0]), path + [2.0, 2.0], 0.0)
         assert (v, w) == pytest.approx(want)
 
 
-def test_sweep_clearance_is_the_nearest_occupied_cell_the_turn_looks_at():
+def test_sweep_clearance_is_the_nearest_occupied_cell_the_turn_looks_at(wall_south):
     """From (2, 1.02) facing east, turning right by 90° looks straight at the wall 0.32 m south:
     the first sample inside its cells is 0.35 m out (samples every 0.05 m); turning left sees
     nothing within 1 m; a turn of 30° right meets the wall 0.32 / sin 30° = 0.64 m out (sample
     0.65 m)."""
-    grid = _wall_south()
+    grid = wall_south()
     pose = np.array([2.0, 1.02, 0.0])
     occ = grid.occupied()
     assert sweep_clearance(grid, occ, pose, -np.pi / 2, 1.0) == pytest.approx(0.35)
@@ -88,7 +77,7 @@ def test_sweep_clearance_is_the_nearest_occupied_cell_the_turn_looks_at():
     assert sweep_clearance(grid, occ, pose, -np.radians(30), 1.0) == pytest.approx(0.65)
 
 
-def test_a_turn_on_the_spot_beside_a_wall_goes_round_the_open_side():
+def test_a_turn_on_the_spot_beside_a_wall_goes_round_the_open_side(wall_south):
     """A robot 0.3 m north of a wall, facing west-south-west (-150°), must turn 150° to face its
     aim due east. The short way (left, through south) sweeps the camera across the wall, so it
     turns right, through north; it keeps turning right where the aim is 170° to its left, and
@@ -96,7 +85,7 @@ def test_a_turn_on_the_spot_beside_a_wall_goes_round_the_open_side():
     rate = 0.5
     cfg = ControlConfig(open_side_turns=True, platform=PlatformConfig(max_turn_rate=rate))
     f = Follower(cfg)
-    grid, aim = _wall_south(), np.array([3.0, 1.0])
+    grid, aim = wall_south(), np.array([3.0, 1.0])
     pose = np.array([2.0, 1.0, np.radians(-150.0)])
     assert f._turn_side("r", grid, pose, aim, 0.0, rate) == -rate and f.long_turns == 1
     pose[2] = np.radians(-170.0)  # turned 20° right: the aim is now 170° to the left
@@ -104,7 +93,7 @@ def test_a_turn_on_the_spot_beside_a_wall_goes_round_the_open_side():
     pose[2] = np.radians(40.0)  # 2·40° > rate: still clipped
     assert f._turn_side("r", grid, pose, aim, 0.0, -rate) == -rate
     assert f._turn_side("r", grid, pose, aim, 0.2, -0.1) == -0.1 and f.spin == {}  # driving: as pure pursuit says
-    free = _wall_south()
+    free = wall_south()
     free.logodds[6, :] = -3.0
     f = Follower(cfg)
     assert f._turn_side("r", free, np.array([2.0, 1.0, np.radians(-150.0)]), aim, 0.0, rate) == rate
@@ -112,10 +101,10 @@ def test_a_turn_on_the_spot_beside_a_wall_goes_round_the_open_side():
     assert f.long_turns == 0
 
 
-def test_the_controller_sends_a_turn_past_a_wall_the_long_way_round():
+def test_the_controller_sends_a_turn_past_a_wall_the_long_way_round(wall_south):
     """The same robot given a path due east: pure pursuit turns it left (150° to go, on the spot at
     the full rate), the controller right; with a 160° threshold for ``open_side_turn`` left."""
-    grid, pose = _wall_south(), {"r": np.array([2.0, 1.0, np.radians(-150.0)])}
+    grid, pose = wall_south(), {"r": np.array([2.0, 1.0, np.radians(-150.0)])}
     path = {"r": np.array([[2.0, 1.0], [2.5, 1.0], [3.0, 1.0]])}
     slow = PlatformConfig(max_turn_rate=0.5)
     assert Controller(ControlConfig(platform=slow)).step(grid, pose, path, 0.0) == {"r": (0.0, 0.5)}
@@ -125,7 +114,7 @@ def test_the_controller_sends_a_turn_past_a_wall_the_long_way_round():
     assert wide.step(grid, pose, path, 0.0) == {"r": (0.0, 0.5)}
 
 
-def test_a_robot_facing_a_wall_backs_away_only_as_far_as_the_room_behind_allows():
+def test_a_robot_facing_a_wall_backs_away_only_as_far_as_the_room_behind_allows(wall_south):
     """From (2, 1.02) facing the wall 0.32 m south, a turn right by 90° sweeps its heading within
     0.35 m of the wall (first sample inside its cells, rays every 10° from −100°). With
     ``turn_clearance`` 0.6 m it backs 0.3 m: the −100° ray then meets the wall 0.63 m out, the first
@@ -135,23 +124,23 @@ def test_a_robot_facing_a_wall_backs_away_only_as_far_as_the_room_behind_allows(
     not at all; with the turn clear, not at all."""
     f = Follower(ControlConfig(turn_clearance=0.6))
     pose = np.array([2.0, 1.02, -np.pi / 2])
-    assert f.backoff(_wall_south(), pose, -np.pi / 2) == pytest.approx(0.3)
-    behind = _wall_south()
+    assert f.backoff(wall_south(), pose, -np.pi / 2) == pytest.approx(0.3)
+    behind = wall_south()
     behind.logodds[16, :] = 3.0  # cells y 1.6-1.7
     assert f.backoff(behind, pose, -np.pi / 2) == pytest.approx(0.2)
     short = Follower(ControlConfig(turn_clearance=0.6, platform=PlatformConfig(rear=0.165)))
     assert short.backoff(behind, pose, -np.pi / 2) == pytest.approx(0.3)
     behind.logodds[13, :] = 3.0  # cells y 1.3-1.4
     assert f.backoff(behind, pose, -np.pi / 2) == 0.0
-    assert f.backoff(_wall_south(), np.array([2.0, 1.02, np.pi / 2]), np.pi / 2) == 0.0
+    assert f.backoff(wall_south(), np.array([2.0, 1.02, np.pi / 2]), np.pi / 2) == 0.0
 
 
-def test_the_controller_backs_the_distance_then_turns():
+def test_the_controller_backs_the_distance_then_turns(wall_south):
     """The robot facing the wall whose path leads north backs at ``recovery_speed`` until it is
     0.3 m from where it began (0.29 m: still backing), then turns on the spot; the backing is
     counted once."""
     cfg = ControlConfig(turn_clearance=0.6, recovery_speed=0.2, platform=PlatformConfig(max_turn_rate=0.5))
-    ctl, grid = Controller(cfg), _wall_south()
+    ctl, grid = Controller(cfg), wall_south()
     path = {"r": np.array([[2.0, 1.5], [2.0, 2.0], [2.0, 2.5], [2.0, 3.0]])}
     for t, y in ((0.0, 1.02), (0.2, 1.06), (1.2, 1.31)):
         assert ctl.step(grid, {"r": np.array([2.0, y, -np.pi / 2])}, path, t) == {"r": (-0.2, 0.0)}
@@ -159,15 +148,15 @@ def test_the_controller_backs_the_distance_then_turns():
     assert v == 0.0 and abs(w) == 0.5 and ctl.follower.backing == {} and ctl.counters()["turn_backoffs"] == 1
 
 
-def test_a_turn_that_does_not_turn_is_reversed_after_the_stall_time():
+def test_a_turn_that_does_not_turn_is_reversed_after_the_stall_time(wall_south):
     """A robot turning on the spot whose heading moves 4° in 1 s (``turn_stall_time``, with 5° as
     ``turn_stall_angle``) is sent the other way round; one whose heading moves 6° is not; with a
     3° angle neither is."""
     path = np.array([[2.0, 2.0], [1.5, 2.5], [1.0, 3.0]])  # 135° to the left: on the spot
     for moved, angle, reversed_ in ((4.0, 5.0, True), (6.0, 5.0, False), (4.0, 3.0, False)):
         f = Follower(ControlConfig(turn_stall_time=1.0, turn_stall_angle=float(np.radians(angle))))
-        assert f.command("r", _wall_south(), np.array([2.0, 2.0, 0.0]), path, 0.0) == (0.0, 1.2)
-        v, w = f.command("r", _wall_south(), np.array([2.0, 2.0, np.radians(moved)]), path, 1.0)
+        assert f.command("r", wall_south(), np.array([2.0, 2.0, 0.0]), path, 0.0) == (0.0, 1.2)
+        v, w = f.command("r", wall_south(), np.array([2.0, 2.0, np.radians(moved)]), path, 1.0)
         assert (v, w) == ((0.0, -1.2) if reversed_ else (0.0, 1.2)), (moved, angle)
         assert f.blocked_turns == int(reversed_)
 
@@ -208,7 +197,7 @@ def test_a_recovery_drives_straight_back_then_forward_if_it_did_not_move():
     assert rec.command("r") == (-0.2, 0.0)
 
 
-def test_the_controller_holds_a_robot_that_would_drive_into_another():
+def test_the_controller_holds_a_robot_that_would_drive_into_another(wall_south):
     """robot1 at (0.5, 2) facing east follows a path east; robot2 0.6 m in front holds it (v = 0)
     with ``keep_clear`` 0.9 m, 0.6 m behind or 0.8 m beside does not; a backing robot is held by a
     robot behind it. A robot recovering drives its recovery, unless everyone halts."""
@@ -219,13 +208,13 @@ def test_the_controller_holds_a_robot_that_would_drive_into_another():
     paths = {"robot1": np.array([[0.5, 2.0], [1.0, 2.0], [1.5, 2.0], [2.0, 2.0]]), "robot2": None}
     for other, held in (([1.1, 2.0], True), ([-0.1, 2.0], False), ([0.5, 2.8], False)):
         ctl = Controller(ControlConfig(keep_clear=0.9))
-        cmds = ctl.step(_wall_south(), {"robot1": me, "robot2": np.array([*other, np.pi])}, paths, 0.0)
+        cmds = ctl.step(wall_south(), {"robot1": me, "robot2": np.array([*other, np.pi])}, paths, 0.0)
         assert (cmds["robot1"][0] == 0.0) == held and ctl.held == int(held) and cmds["robot2"] == (0.0, 0.0)
     ctl = Controller(ControlConfig(keep_clear=0.9))
     poses = {"robot1": me, "robot2": np.array([-0.1, 2.0, 0.0])}
     ctl.recovery.start("robot1", me, 0.0)
-    assert ctl.step(_wall_south(), poses, paths, 0.2)["robot1"] == (0.0, 0.0) and ctl.held == 1
-    assert ctl.step(_wall_south(), poses, paths, 0.4, halt=True)["robot1"] == (0.0, 0.0) and ctl.held == 1
+    assert ctl.step(wall_south(), poses, paths, 0.2)["robot1"] == (0.0, 0.0) and ctl.held == 1
+    assert ctl.step(wall_south(), poses, paths, 0.4, halt=True)["robot1"] == (0.0, 0.0) and ctl.held == 1
     assert ctl.counters() == {"stalls": 0, "held": 1, "boxed_in": 0, "long_turns": 0, "turn_backoffs": 0,
                               "blocked_turns": 0}
 

@@ -442,16 +442,8 @@ def test_a_robot_is_not_sent_to_the_unseen_ground_around_a_teammate(avoid_others
     assert (d >= 1.0) == avoid_others, d
 
 
-def _wall_south() -> OccupancyGrid:
-    """6 m × 4 m observed free, with a wall in the cells y 0.6–0.7 m along the whole width."""
-    grid = OccupancyGrid(GridConfig(resolution=0.1), extent=((0.0, 0.0), (6.0, 4.0)))
-    grid.observed[:] = True
-    grid.logodds[:] = -3.0
-    grid.logodds[6, :] = 3.0
-    return grid
 
-
-def test_the_follower_backs_away_then_turns_without_checking_again():
+def test_the_follower_backs_away_then_turns_without_checking_again(wall_south):
     """A robot facing the wall whose path leads north: it backs at ``recovery_speed`` (counted
     once), keeps backing until 0.3 m from where it began, then turns on the spot."""
     from mrslam_core.exploration.explorer import Explorer, Goal
@@ -460,7 +452,7 @@ def test_the_follower_backs_away_then_turns_without_checking_again():
     cfg = ControlConfig(turn_clearance=0.6, platform=slow)
     ex = Explorer(ExplorationConfig(), ["r"], Controller(cfg))
     ex.last_plan_s = 0.0
-    grid = _wall_south()
+    grid = wall_south()
     ex.goals["r"] = Goal(np.array([2.0, 3.0]), np.array([[2.0, 1.5], [2.0, 2.0], [2.0, 2.5], [2.0, 3.0]]), 0.0)
     assert ex.step(grid, {"r": np.array([2.0, 1.02, -np.pi / 2])}, 0.2) == {"r": (-cfg.recovery_speed, 0.0)}
     assert ex.step(grid, {"r": np.array([2.0, 1.22, -np.pi / 2])}, 0.4) == {"r": (-cfg.recovery_speed, 0.0)}
@@ -474,7 +466,7 @@ def test_the_follower_backs_away_then_turns_without_checking_again():
     assert off.step(grid, {"r": np.array([2.0, 1.02, -np.pi / 2])}, 0.2)["r"][0] == 0.0
 
 
-def test_a_turn_on_the_spot_that_does_not_turn_goes_the_other_way_round_once():
+def test_a_turn_on_the_spot_that_does_not_turn_goes_the_other_way_round_once(wall_south):
     """A robot at (2, 2) facing east whose path leads north-west turns left (0.5 rad/s). Its
     heading stays put: 1.5 s (``turn_stall_time``) after the turn began it is told to turn right,
     the long way, and keeps that direction; blocked that way too, it is not turned back again.
@@ -483,7 +475,7 @@ def test_a_turn_on_the_spot_that_does_not_turn_goes_the_other_way_round_once():
 
     cfg = ControlConfig(platform=PlatformConfig(max_turn_rate=0.5))
     path = np.array([[1.5, 2.5], [1.0, 3.0], [0.5, 3.5]])
-    grid = _wall_south()
+    grid = wall_south()
     ex = Explorer(ExplorationConfig(), ["r"], Controller(cfg))
     ex.last_plan_s, ex.goals["r"] = 0.0, Goal(np.array([0.5, 3.5]), path, 0.0)
     ex.known_at_plan = int(grid.observed.sum())  # no re-assignment: the map does not grow
