@@ -155,6 +155,22 @@ def test_example_config_matches_the_node_configs(capsys):
         assert len(out) == len(cfg.nodes) and all(" -m mrslam_ros." in line for line in out)
 
 
+
+def test_view_option_adds_the_view_node_for_the_frontends_robots(capsys):
+    from argparse import Namespace
+
+    from mrslam_core.configio import load_yaml
+    from mrslam_ros.launch import _robot_namespaces, main, view_spec
+
+    config = HERE.parents[1] / "config" / "launch_sim2.yaml"
+    assert main([str(config), "--view", "--view-port", "9001", "--view-ellipsoids", "--dry-run"]) == 0
+    view = [line for line in capsys.readouterr().out.splitlines() if "mrslam_ros.view_node" in line]
+    assert len(view) == 1 and "__node:=view" in view[0]
+    spec = view_spec(Namespace(view_port=9001, view_host=None, view_ellipsoids=True),
+                     _robot_namespaces(load_yaml(LaunchConfig, config)))
+    assert spec.params == {"robots": ["robot1", "robot2"], "port": 9001, "ellipsoids": True} and not spec.required
+
+
 def test_params_files_make_mixed_number_lists_floats(tmp_path):
     import yaml
 
