@@ -2,8 +2,17 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from typing import Literal
+
+
+def _refuse_inactive(cfg, names: tuple[str, ...], why: str, prefix: str = "") -> None:
+    """Raise ValueError naming the first of ``names`` (fields of ``cfg``) set away from its default
+    although it does nothing (``why``): a setting that silently does nothing misleads whoever tunes it."""
+    defaults = {f.name: f.default for f in fields(cfg)}
+    for name in names:
+        if getattr(cfg, name) != defaults[name]:
+            raise ValueError(f"{prefix}{name} = {getattr(cfg, name)!r} does nothing {why}")
 
 
 @dataclass(frozen=True)
@@ -103,6 +112,15 @@ class AssociationConfig:
             raise ValueError("outlier_gate must be >= 0 and outlier_rounds >= 1")
         if self.track_gate < 0 or self.track_memory < 1:
             raise ValueError("track_gate must be >= 0 and track_memory >= 1")
+        if self.mode == "hungarian":
+            _refuse_inactive(self, ("geometry_weight", "descriptor_trust_gate", "track_gate"),
+                             "with mode hungarian (the ml rule's)")
+        if self.candidate_search == "descriptor":
+            _refuse_inactive(self, ("search_radius_m",), "with candidate_search descriptor (the spatial search's)")
+        if self.outlier_gate == 0:
+            _refuse_inactive(self, ("outlier_rounds",), "while outlier_gate is 0 (off)")
+        if self.track_gate == 0:
+            _refuse_inactive(self, ("track_memory",), "while track_gate is 0 (off)")
 
 
 @dataclass(frozen=True)
@@ -221,3 +239,14 @@ class FilterConfig:
             raise ValueError("resample_threshold must be in [0, 1]")
         if any(s < 0 for s in self.initial_pose_sigma):
             raise ValueError("initial_pose_sigma must be >= 0")
+        if self.proposal == "fastslam1":
+            _refuse_inactive(self.association, ("outlier_gate",), "with proposal fastslam1 (it prunes the "
+                             "FastSLAM 2.0 proposal's pairs)", "association.")
+            _refuse_inactive(self.relocalization, ("enabled",), "with proposal fastslam1 (it redraws from the "
+                             "FastSLAM 2.0 proposal)", "relocalization.")
+        if not self.relocalization.enabled:
+            _refuse_inactive(self.relocalization, ("gate_probability", "min_landmarks", "iterations"),
+                             "while relocalization is off", "relocalization.")
+        if not self.existence.enabled:
+            _refuse_inactive(self.existence, ("fov_rad", "min_range", "max_range", "max_score"),
+                             "while existence is off", "existence.")

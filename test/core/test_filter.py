@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from mrslam_core.datasets.synthetic import SyntheticWorld, SyntheticWorldConfig
-from mrslam_core.slam.config import AssociationConfig, FilterConfig
+from mrslam_core.slam.config import AssociationConfig, ExistenceConfig, FilterConfig, RelocalizationConfig
 from mrslam_core.slam.filter import FilterInputError, MultiRobotFastSLAM, RobotUpdate
 from mrslam_core.types import ObservationSet, RobotSighting
 
@@ -129,6 +129,28 @@ def test_config_validation():
     with pytest.raises(FilterInputError):
         MultiRobotFastSLAM(FilterConfig(), ["a", "a"], np.zeros((2, 3)))
 
+
+
+@pytest.mark.parametrize("make, field", [
+    (lambda: FilterConfig(association=AssociationConfig(outlier_gate=11.34)), "association.outlier_gate"),
+    (lambda: FilterConfig(relocalization=RelocalizationConfig(enabled=True)), "relocalization.enabled"),
+    (lambda: FilterConfig(relocalization=RelocalizationConfig(iterations=3)), "relocalization.iterations"),
+    (lambda: FilterConfig(existence=ExistenceConfig(max_range=8.0)), "existence.max_range"),
+    (lambda: AssociationConfig(mode="hungarian", track_gate=30.0), "track_gate"),
+    (lambda: AssociationConfig(mode="hungarian", geometry_weight=0.0), "geometry_weight"),
+    (lambda: AssociationConfig(candidate_search="descriptor", search_radius_m=2.0), "search_radius_m"),
+    (lambda: AssociationConfig(outlier_rounds=5), "outlier_rounds"),
+    (lambda: AssociationConfig(track_memory=3), "track_memory"),
+])
+def test_a_setting_that_does_nothing_under_the_chosen_mode_is_an_error(make, field):
+    with pytest.raises(ValueError, match=f"^{field.replace('.', '[.]')} = .* does nothing"):
+        make()
+    # the same settings where they act are accepted
+    FilterConfig(proposal="fastslam2", association=AssociationConfig(outlier_gate=11.34, outlier_rounds=5,
+                                                                     track_gate=30.0, track_memory=3),
+                 relocalization=RelocalizationConfig(enabled=True, iterations=3),
+                 existence=ExistenceConfig(enabled=True, max_range=8.0))
+    AssociationConfig(mode="hungarian", candidate_search="descriptor", max_candidates=4)
 
 def test_spurious_landmarks_disappear_with_the_existence_counter():
     from mrslam_core.slam.config import ExistenceConfig

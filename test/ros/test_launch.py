@@ -132,11 +132,9 @@ def test_cli_bad_config(tmp_path, capsys):
     assert "missing required key nodes[0].name" in capsys.readouterr().err
 
 
-def test_example_config_matches_the_node_configs(capsys):
-    """config/launch_*.yaml: every node module exists and its params fit its *NodeConfig dataclass."""
-    import dataclasses
-    import importlib
-
+def test_example_configs_dry_run(capsys):
+    """config/launch_*.yaml: the launcher builds every node's command (their params are checked
+    against the node configs in test_shipped_yaml.py)."""
     from mrslam_core.configio import load_yaml
     from mrslam_ros.launch import main
 
@@ -144,16 +142,9 @@ def test_example_config_matches_the_node_configs(capsys):
     assert examples
     for path in examples:
         cfg = load_yaml(LaunchConfig, path)
-        assert cfg.nodes
-        for spec in cfg.nodes:
-            module = importlib.import_module(spec.module)
-            classes = [c for n, c in vars(module).items() if n.endswith("NodeConfig") and dataclasses.is_dataclass(c)]
-            assert len(classes) == 1, spec.module
-            from_dict(classes[0], spec.params)  # raises ConfigError naming a wrong key
         assert main([str(path), "--dry-run"]) == 0
         out = capsys.readouterr().out.splitlines()
         assert len(out) == len(cfg.nodes) and all(" -m mrslam_ros." in line for line in out)
-
 
 
 def test_view_option_adds_the_view_node_for_the_frontends_robots(capsys):
