@@ -343,8 +343,6 @@ def main(argv: list[str]) -> int:
                     help="rendezvous joins anchored on each particle's own poses (FusionConfig.rendezvous_anchor)")
     ap.add_argument("--pair-draw", choices=["grid", "product"],
                     help="how a join draws its (central, local) ancestor pairs (FusionConfig.pair_draw)")
-    ap.add_argument("--weight-gain", type=float,
-                    help="FilterConfig.weight_gain (GMapping's ogain) of both runs, known and unknown start")
     ap.add_argument("--out", default="runs/experiments")
     args = ap.parse_args(argv)
     ds = MrclamDataset(args.folder)
@@ -366,8 +364,6 @@ def main(argv: list[str]) -> int:
     mc = base.mrclam
     if args.particles:
         mc = replace(mc, filter=replace(mc.filter, num_particles=args.particles))
-    if args.weight_gain:
-        mc = replace(mc, filter=replace(mc.filter, weight_gain=args.weight_gain))
     if args.duration:
         mc = replace(mc, duration=args.duration)
     base = replace(base, mrclam=mc)
@@ -396,7 +392,7 @@ def main(argv: list[str]) -> int:
     lines = [
         (f"MR.CLAM {args.folder}, robots {list(base.known)} known start, others unknown; filter {args.filter}, "
          f"rendezvous {'on' if base.rendezvous else 'off'}, hold gauge {'on' if base.hold_gauge else 'off'}; "
-         f"M = {mc.filter.num_particles}, weight gain {mc.filter.weight_gain:g}, {args.seeds} seed(s); ATE RMSE [m] from the merge to the end, "
+         f"M = {mc.filter.num_particles}, {args.seeds} seed(s); ATE RMSE [m] from the merge to the end, "
          "both runs over the same window. Unaligned = map frame as estimated (the bound applies to it); "
          "team-aligned = after ONE SE(2) transform fitted to all robots' post-merge positions jointly, per run"),
         "",

@@ -36,15 +36,12 @@ def main(argv: list[str]) -> int:
     ap.add_argument("folder", help="MR.CLAM dataset folder, e.g. ../shared/data/mrclam/dataset6")
     ap.add_argument("--seeds", type=int, default=3)
     ap.add_argument("--particles", type=int)
-    ap.add_argument("--weight-gain", type=float, help="FilterConfig.weight_gain (GMapping's ogain) of every variant")
     ap.add_argument("--out", default="runs/experiments")
     args = ap.parse_args(argv)
     ds = MrclamDataset(args.folder)
     base = MrclamConfig()
     if args.particles:
         base = replace(base, filter=replace(base.filter, num_particles=args.particles))
-    if args.weight_gain:
-        base = replace(base, filter=replace(base.filter, weight_gain=args.weight_gain))
     table: dict[str, list[dict]] = {}
     for name, change in VARIANTS.items():
         table[name] = []
@@ -55,7 +52,7 @@ def main(argv: list[str]) -> int:
             print(f"{name:22s} seed {seed}: " + " ".join(f"{k} {v['ate_rmse_m']:.3f}" for k, v in r.items()), flush=True)
     robots = list(table["joint + sightings"][0]["robots"])
     lines = [
-        f"MR.CLAM {args.folder}, M = {base.filter.num_particles}, weight gain {base.filter.weight_gain:g}, {args.seeds} seeds; ATE RMSE [m] "
+        f"MR.CLAM {args.folder}, M = {base.filter.num_particles}, {args.seeds} seeds; ATE RMSE [m] "
         "mean (max) over seeds; odometry = dead reckoning",
         "",
         "| variant | " + " | ".join(robots) + " | mean |",

@@ -206,13 +206,6 @@ class FilterConfig:
             robots, through resampling, from selecting the unobserved robot's random motion
             noise (its weighted mean then drifts away from odometry by tens of degrees on
             MR.CLAM robot 4 while it sees nothing for 80 s).
-        weight_gain: each update's log likelihoods are divided by this before they enter the
-            importance weights (GMapping's ``ogain``); the summed score of :meth:`best_particle`
-            keeps the full likelihood. Observations treated as independent whose errors are not
-            (one frame's points share the calibration, one tracked corner its detection error)
-            make the weights far more peaked than the evidence; every resampling then draws the
-            OTHER robots' poses afresh from their spread, and their weighted means random-walk.
-            1 is the exact filter.
     """
 
     num_particles: int = 200
@@ -228,13 +221,10 @@ class FilterConfig:
     existence: ExistenceConfig = field(default_factory=ExistenceConfig)
     relocalization: RelocalizationConfig = field(default_factory=RelocalizationConfig)
     defer_motion_noise: bool = False
-    weight_gain: float = 1.0
 
     def __post_init__(self) -> None:
         if self.num_particles < 1:
             raise ValueError("num_particles must be >= 1")
-        if not self.weight_gain >= 1.0:
-            raise ValueError("weight_gain must be >= 1")
         if not 0.0 <= self.resample_threshold <= 1.0:
             raise ValueError("resample_threshold must be in [0, 1]")
         if any(s < 0 for s in self.initial_pose_sigma):

@@ -212,7 +212,7 @@ class MultiRobotFastSLAM:
             created += c
             for sighting in upd.sightings:
                 self._observe_robot(k, sighting, log_l)
-            self.log_w = normalise_log_weights(self.log_w + log_l / self.config.weight_gain)
+            self.log_w = normalise_log_weights(self.log_w + log_l)
             self.score += log_l
         neff = effective_sample_fraction(self.log_w)
         resampled = neff < self.config.resample_threshold

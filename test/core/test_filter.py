@@ -310,22 +310,6 @@ def test_deferred_motion_noise_follows_odometry_until_measured():
     assert np.all(spread > 0.01)
 
 
-def test_weight_gain_flattens_the_weights_and_keeps_the_full_score():
-    """With gain g the log weights are the exact filter's divided by g (renormalised); poses,
-    maps and the best-particle score are unchanged (no resampling here)."""
-    cfgs = [FilterConfig(num_particles=40, seed=8, resample_threshold=0.0, weight_gain=g) for g in (1.0, 2.5)]
-    exact, tempered = (run(WORLD, cfg, 2)[0] for cfg in cfgs)
-    np.testing.assert_array_equal(tempered.poses, exact.poses)
-    np.testing.assert_array_equal(tempered.score, exact.score)
-    expect = exact.log_w / 2.5
-    expect -= np.log(np.exp(expect - expect.max()).sum()) + expect.max()
-    np.testing.assert_allclose(tempered.log_w, expect, atol=1e-9)
-    neff = lambda lw: 1.0 / np.sum(np.exp(2 * lw)) / lw.size  # noqa: E731
-    assert neff(exact.log_w) < 0.15 < 0.3 < neff(tempered.log_w)  # 0.12 and 0.33
-    with pytest.raises(ValueError):
-        FilterConfig(weight_gain=0.5)
-
-
 def _means(slam):
     """(M, N, 3) landmark means of every particle."""
     n = slam.landmarks.size
