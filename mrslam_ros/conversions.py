@@ -26,6 +26,7 @@ from sensor_msgs.msg import CameraInfo, Image, LaserScan, PointCloud2, PointFiel
 from visualization_msgs.msg import Marker, MarkerArray
 
 from mrslam_core.frontend.camera import CameraCalibration
+from mrslam_core.frontend.frontend import ENCODINGS as FRONTEND_ENCODINGS
 from mrslam_core.geometry.se2 import quaternion_to_yaw, yaw_to_quaternion
 from mrslam_core.types import ObservationSet
 
@@ -48,8 +49,8 @@ def ns_to_stamp(ns: int) -> Time:
 
 
 # ----------------------------------------------------------------------------- images
-_ENCODINGS = {"mono8": (np.uint8, 1), "mono16": (np.uint16, 1), "rgb8": (np.uint8, 3), "bgr8": (np.uint8, 3),
-              "rgba8": (np.uint8, 4), "bgra8": (np.uint8, 4)}
+#: the image encodings the frontend takes, as (dtype, channels)
+_ENCODINGS = {name: (dtype, channels) for name, (channels, dtype, _) in FRONTEND_ENCODINGS.items()}
 
 
 def image_to_array(msg: Image) -> np.ndarray:

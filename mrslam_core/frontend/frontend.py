@@ -28,7 +28,7 @@ from mrslam_core.frontend.tracking import Tracker
 from mrslam_core.geometry.stereo import optical_to_body, triangulate, triangulation_covariance
 from mrslam_core.types import ObservationSet
 
-_ENCODINGS = {  # encoding -> (channels, dtype, conversion to grey)
+ENCODINGS = {  # encoding -> (channels, dtype, conversion to grey)
     "mono8": (1, np.uint8, None),
     "8UC1": (1, np.uint8, None),
     "mono16": (1, np.uint16, None),
@@ -111,9 +111,9 @@ def image_to_grey(image: object, encoding: str | None) -> tuple[np.ndarray | Non
             encoding = "bgr8" if image.shape[2] == 3 else "bgra8"
         else:
             return None, "unsupported_dtype"
-    if encoding not in _ENCODINGS:
+    if encoding not in ENCODINGS:
         return None, "unsupported_encoding"
-    channels, dtype, code = _ENCODINGS[encoding]
+    channels, dtype, code = ENCODINGS[encoding]
     shape_ok = image.ndim == 2 if channels == 1 else (image.ndim == 3 and image.shape[2] == channels)
     if not shape_ok or image.dtype != dtype:
         return None, "encoding_mismatch"

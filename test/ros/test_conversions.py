@@ -64,7 +64,8 @@ def test_malformed_clouds_are_rejected():
 
 
 @pytest.mark.parametrize("encoding,shape,dtype", [("mono8", (4, 6), np.uint8), ("rgb8", (4, 6, 3), np.uint8),
-                                                  ("bgr8", (4, 6, 3), np.uint8), ("mono16", (4, 6), np.uint16)])
+                                                  ("bgr8", (4, 6, 3), np.uint8), ("mono16", (4, 6), np.uint16),
+                                                  ("8UC1", (4, 6), np.uint8), ("16UC1", (4, 6), np.uint16)])
 def test_image_round_trip(encoding, shape, dtype):
     arr = (np.arange(np.prod(shape)) % 250).astype(dtype).reshape(shape)
     msg = array_to_image(arr, encoding, 5, "cam")
