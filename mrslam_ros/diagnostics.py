@@ -95,3 +95,16 @@ class Diagnostics(Counters):
             counters, level, message = self.snapshot()
         counters.update(extra or {})
         self.pub.publish(diagnostics_msg(self.name, counters, self.node.get_clock().now().nanoseconds, level, message))
+
+
+def incompatible_qos_events(diag: Counters, topic: str):
+    """Subscription event callbacks that count, as ``incompatible_qos``, every publisher of
+    ``topic`` whose QoS cannot match the subscription (a best-effort camera driver and a reliable
+    subscription): nothing it publishes would arrive, and nothing else would say so."""
+    from rclpy.event_handler import SubscriptionEventCallbacks
+
+    def on_incompatible(status) -> None:
+        diag.count("incompatible_qos", f"a publisher of {topic} offers QoS this subscription cannot match "
+                   f"(policy {status.last_policy_kind})", max(int(status.total_count_change), 1))
+
+    return SubscriptionEventCallbacks(incompatible_qos=on_incompatible)

@@ -21,10 +21,12 @@ from __future__ import annotations
 import sys
 from collections import deque
 from dataclasses import dataclass, field
+from typing import Literal
 
 import numpy as np
 from nav_msgs.msg import Odometry
 from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import CameraInfo, Image, LaserScan, PointCloud2
 
 from mrslam_core.frontend.camera import StereoRig
@@ -41,7 +43,7 @@ from mrslam_ros.conversions import (
     stamp_to_ns,
     visual_odometry_msg,
 )
-from mrslam_ros.diagnostics import Diagnostics
+from mrslam_ros.diagnostics import Diagnostics, incompatible_qos_events
 from mrslam_ros.params import declare_config, read_config
 from mrslam_ros.qos import OBSERVATION_HISTORY, ODOMETRY_HISTORY
 from mrslam_ros.spin import run_node
@@ -60,6 +62,10 @@ class FrontendNodeConfig:
             Pioneer head: 0.12 m ahead, 0.06 m left, 0.45 m up).
         max_skew_ns: largest left/right stamp difference paired [ns].
         queue: images kept per side while waiting for a partner.
+        image_qos: reliability of the image and camera_info subscriptions: ``reliable`` matches
+            reliable publishers only (the simulator, bag replays); ``best_effort`` matches both,
+            and is what a camera driver publishing best-effort (ROS's sensor-data QoS) needs. A
+            publisher the subscription cannot match is counted as ``incompatible_qos``.
         frontend: the frontend's own parameters.
     """
 
@@ -67,6 +73,7 @@ class FrontendNodeConfig:
     t_base_cam: tuple[float, ...] = _SIM_EXTRINSIC
     max_skew_ns: int = 5_000_000
     queue: int = 5
+    image_qos: Literal["reliable", "best_effort"] = "reliable"
     frontend: FrontendConfig = field(default_factory=FrontendConfig)
 
 
@@ -94,12 +101,17 @@ class FrontendNode(Node):
         #: odometry at the frame's stamp had not arrived yet (``behind``), or the previous frame
         #: had none (``previous``); reported on /diagnostics as ``prior_missing_*``
         self.prior_missing = {"behind": 0, "previous": 0}
-        self.create_subscription(Odometry, "odom", self.on_odom, 50)
+        self.create_subscription(Odometry, "odom", self.on_odom, 50, event_callbacks=incompatible_qos_events(self.diag, "odom"))
         self._vo_cov = np.zeros((3, 3))  # the planar pose covariance of the visual odometry
         self._vo_stamp: int | None = None
+        sensor_qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT if self.cfg.image_qos == "best_effort"
+                                else ReliabilityPolicy.RELIABLE)
         for i, side in enumerate(("left", "right")):
-            self.create_subscription(CameraInfo, f"stereo/{side}/camera_info", lambda m, s=side: self.infos.__setitem__(s, m), 10)
-            self.create_subscription(Image, f"stereo/{side}/image_raw", lambda m, i=i: self.on_image(i, m), 10)
+            info, image = f"stereo/{side}/camera_info", f"stereo/{side}/image_raw"
+            self.create_subscription(CameraInfo, info, lambda m, s=side: self.infos.__setitem__(s, m), sensor_qos,
+                                     event_callbacks=incompatible_qos_events(self.diag, info))
+            self.create_subscription(Image, image, lambda m, i=i: self.on_image(i, m), sensor_qos,
+                                     event_callbacks=incompatible_qos_events(self.diag, image))
 
     @property
     def drops(self):

@@ -70,3 +70,39 @@ def test_frontend_node_publishes_observations():
     finally:
         rclpy.shutdown()
         sim.close()
+
+
+@pytest.mark.parametrize("image_qos", ["reliable", "best_effort"])
+def test_a_best_effort_camera_is_counted_or_heard(image_qos):
+    """A camera driver publishing best-effort (ROS's sensor-data QoS) cannot match a reliable
+    subscription: the node counts it (``incompatible_qos``); with ``image_qos: best_effort`` its
+    images arrive."""
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.parameter import Parameter
+    from rclpy.qos import qos_profile_sensor_data
+    from sensor_msgs.msg import Image
+
+    from mrslam_ros.conversions import array_to_image
+    from mrslam_ros.frontend_node import FrontendNode
+
+    rclpy.init()
+    try:
+        node = FrontendNode(namespace="robot1", parameter_overrides=[Parameter("image_qos", value=image_qos)])
+        camera = rclpy.create_node("camera", namespace="robot1")
+        pubs = [camera.create_publisher(Image, f"stereo/{side}/image_raw", qos_profile_sensor_data) for side in ("left", "right")]
+        ex = SingleThreadedExecutor()
+        ex.add_node(node)
+        ex.add_node(camera)
+        end = time.time() + 10
+        while time.time() < end and not (node.drops.get("incompatible_qos") or node.drops.get("no_camera_info")):
+            stamp = int(time.time() * 1e9)
+            for pub in pubs:
+                pub.publish(array_to_image(np.zeros((4, 6), np.uint8), "mono8", stamp, "cam"))
+            ex.spin_once(timeout_sec=0.05)
+        if image_qos == "reliable":
+            assert node.drops["incompatible_qos"] >= 1 and not node.drops.get("no_camera_info")
+        else:  # heard (and dropped for want of camera_info, the next thing it checks)
+            assert node.drops["no_camera_info"] >= 1 and not node.drops.get("incompatible_qos")
+    finally:
+        rclpy.shutdown()
