@@ -52,3 +52,18 @@ def rpe_rmse(t: np.ndarray, est: np.ndarray, gt: np.ndarray, delta: float = 1.0)
     d_gt = between(gt[i], gt[j])
     err = between(d_gt, d_est)
     return float(np.sqrt(np.mean(err[:, 0] ** 2 + err[:, 1] ** 2)))
+
+
+def longest_stay(t: np.ndarray, xy: np.ndarray, radius: float = 0.2) -> tuple[float, int]:
+    """Longest time a robot stayed put: the largest t_j − t_i [s] such that every position from i
+    to j is within ``radius`` [m] of position i, and that i (times t (N,) [s], positions xy (N, 2+)
+    [m]; the first such stretch where several are as long)."""
+    t = np.asarray(t, float)
+    xy = np.asarray(xy, float)[:, :2]
+    best, start = 0.0, 0
+    for i in range(len(t)):
+        away = np.flatnonzero(np.hypot(*(xy[i + 1:] - xy[i]).T) > radius)
+        j = i + int(away[0]) if away.size else len(t) - 1  # the last index still within
+        if t[j] - t[i] > best:
+            best, start = float(t[j] - t[i]), i
+    return best, start

@@ -72,8 +72,13 @@ class TeamConfig:
             raise ValueError("need robots >= 1, seconds > 0 and control_period > 0")
 
 
-def run(cfg: TeamConfig, progress: bool = False) -> dict:
-    """Run the closed loop; returns trajectories, step times, the map and counters."""
+def run(cfg: TeamConfig, progress: bool = False, coverage_every: float = 0.0) -> dict:
+    """Run the closed loop; returns trajectories, step times, the map and counters.
+
+    ``coverage_every`` > 0: every that many simulated seconds [s], and at the end, the explored
+    fraction of the world's reachable free area is recorded as "coverage" (C, 2): time [s],
+    fraction (else "coverage" is None).
+    """
     sim = Simulation(cfg.sim)
     names = [f"robot{i + 1}" for i in range(cfg.robots)]
     for n in names:
@@ -93,6 +98,9 @@ def run(cfg: TeamConfig, progress: bool = False) -> dict:
     rec = {n: {"t": [0.0], "est": [starts[i]], "gt": [starts[i]], "odom": [starts[i]]} for i, n in enumerate(names)}
     next_control = 0
     control_ns = int(cfg.control_period * 1e9)
+    truth_free = sim.world.reachable_free(cfg.grid.resolution) if hasattr(sim.world, "reachable_free") else None
+    coverage: list[tuple[float, float]] | None = [] if coverage_every > 0 and truth_free is not None else None
+    next_coverage, coverage_ns = 0, int(coverage_every * 1e9)
     end_ns = int(cfg.seconds * 1e9)
     wall = time.perf_counter()
     while sim.time_ns < end_ns:
@@ -120,6 +128,9 @@ def run(cfg: TeamConfig, progress: bool = False) -> dict:
             r["odom"].append(_odom_in_map(starts[names.index(n)], odom0[n], done.odom))
             if scans.get(n) is not None:  # the other robots at their newest estimates
                 grid.insert(done.pose, Scan.from_obstacle_scan(scans[n]), [rec[o]["est"][-1][:2] for o in names if o != n])
+        if coverage is not None and sim.time_ns >= next_coverage:
+            next_coverage += coverage_ns
+            coverage.append((sim.time_ns * 1e-9, _explored(grid, truth_free, cfg.grid.resolution)))
         if cfg.explore and sim.time_ns >= next_control:
             next_control += control_ns
             poses = {n: slam.estimate().mean[slam.index[n]] for n in names}
@@ -131,21 +142,35 @@ def run(cfg: TeamConfig, progress: bool = False) -> dict:
             print(f"  t = {sim.time_ns * 1e-9:5.0f} s  wall {time.perf_counter() - wall:6.1f} s", file=sys.stderr, flush=True)
     trajectories = {n: {k: np.array(v) for k, v in r.items()} for n, r in rec.items()}
     _, mean, cov, _, _ = slam.best_map()
-    truth_free = sim.world.reachable_free(cfg.grid.resolution) if hasattr(sim.world, "reachable_free") else None
+    end_s = sim.time_ns * 1e-9
     sim.close()
-    explored = None
-    if truth_free is not None:
-        explored = explored_fraction(grid.observed, grid.origin, grid.res, truth_free, cfg.grid.resolution)
+    explored = _explored(grid, truth_free, cfg.grid.resolution) if truth_free is not None else None
+    if coverage is not None and coverage[-1][0] < end_s:
+        coverage.append((end_s, explored))
     return {
         "trajectories": trajectories, "update_ms": np.array(mapper.update_ms), "landmarks": {"mean": mean, "cov": cov},
         "dropped": dict(slam.dropped) | dict(mapper.drops), "map_checks": dict(mapper.map_checks),
         "relocalizations": mapper.relocalizations, "frontend_drops": {n: dict(f.drops) for n, f in frontends.items()},
-        "explored_fraction": explored, "exploration_state": explorer.state.value, **explorer.controller.counters(),
+        "explored_fraction": explored, "coverage": None if coverage is None else np.array(coverage),
+        "exploration_state": explorer.state.value, **explorer.controller.counters(),
         "wall_s": time.perf_counter() - wall, "outlier_matches": slam.outlier_pairs / slam.num_particles,
         "occupancy": {"probability": grid.probability(), "known": grid.observed.copy(), "origin": grid.origin,
                       "resolution": grid.res, "free_thresh": cfg.grid.free_below,
                       "occupied_thresh": cfg.grid.occupied_above} if grid.observed.size else None,  # None: no scan came
     }
+
+
+def write_team_run(out: str | Path, cfg: TeamConfig, res: dict) -> dict:
+    """The run folder of a :func:`run` result (``evaluation.report.write_run``); returns the report."""
+    counters = ("explored_fraction", "dropped", "frontend_drops", "wall_s", "exploration_state", "stalls", "held",
+                "boxed_in", "long_turns", "turn_backoffs", "blocked_turns", "outlier_matches", "map_checks",
+                "relocalizations")
+    return write_run(out, res["trajectories"], cfg, res["update_ms"], res["landmarks"],
+                     extra={k: res[k] for k in counters}, occupancy=res["occupancy"])
+
+
+def _explored(grid: OccupancyGrid, truth_free: np.ndarray, resolution: float) -> float:
+    return explored_fraction(grid.observed, grid.origin, grid.res, truth_free, resolution)
 
 
 def _odom_in_map(start: np.ndarray, odom0: np.ndarray, odom: np.ndarray) -> np.ndarray:
@@ -173,14 +198,7 @@ def main(argv: list[str]) -> int:
         cfg = replace(cfg, seconds=args.seconds)
     print(f"simulated team: {cfg.robots} robots, {cfg.seconds:.0f} s in world {cfg.sim.world}", flush=True)
     res = run(cfg, progress=True)
-    report = write_run(args.out, res["trajectories"], cfg, res["update_ms"], res["landmarks"],
-                       extra={"explored_fraction": res["explored_fraction"], "dropped": res["dropped"],
-                              "frontend_drops": res["frontend_drops"], "wall_s": res["wall_s"],
-                              "exploration_state": res["exploration_state"], "stalls": res["stalls"], "held": res["held"],
-                              "boxed_in": res["boxed_in"], "long_turns": res["long_turns"],
-                              "turn_backoffs": res["turn_backoffs"], "blocked_turns": res["blocked_turns"],
-                              "outlier_matches": res["outlier_matches"], "map_checks": res["map_checks"],
-                              "relocalizations": res["relocalizations"]}, occupancy=res["occupancy"])
+    report = write_team_run(args.out, cfg, res)
     for name, r in report["robots"].items():
         print(f"  {name}: ATE {r['ate_rmse_m']:.3f} m (odometry {r['odom_ate_rmse_m']:.3f} m), RPE {r['rpe_rmse_m']:.3f} m")
     u = report["update_ms"]

@@ -2,7 +2,8 @@
 
 ``Simulation`` steps the world at a fixed physics rate, drives the robots from (v, ω) commands,
 integrates noisy wheel odometry and renders stereo pairs with depth; ``load_world`` reads the
-YAML worlds (``office``, ``small`` or a file).
+YAML worlds (built-in ones such as ``office``, a file, or a ``gen:KIND:SEED`` building from
+:mod:`~mrslam_core.sim.worldgen`) and checks them.
 """
 
 from mrslam_core.sim.config import DriveConfig, OdometryNoiseConfig, SimConfig, StereoCameraConfig

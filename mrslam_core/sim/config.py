@@ -151,7 +151,10 @@ class SimConfig:
     """The simulation.
 
     Attributes:
-        world: a built-in world name (``office``, ``small``, ``hall40x30``) or a path to a world YAML.
+        world: a built-in world name (``office``, ``small``, ``hall40x30``, ``ring24x16``,
+            ``openplan18x14``, ``warehouse30x20``), a generated building ``gen:KIND:SEED[:STARTS[:ROBOTS]]``
+            (KIND office, ring, open or warehouse; STARTS together or apart; see
+            :mod:`mrslam_core.sim.worldgen`) or a path to a world YAML.
         physics_hz: physics steps per simulated second.
         seed: seeds the odometry noise and the procedural textures.
         texture_density: texels per metre on the floor, walls and furniture.

@@ -19,6 +19,11 @@ A world file::
 
 Textures: ``unique`` (procedural, seeded, rich in corners; the default), ``repetitive`` (one
 pattern of look-alike corners repeated) or ``plain`` (uniform, featureless).
+
+Every world is checked when loaded (:func:`check_world`): walls must not overlap (run along each
+other or cross; they may meet at their ends or in a T), and every start pose must be clear of the
+walls and boxes by the robot's half width and reachable from the first one. Each error names the
+field, e.g. ``walls[5] crosses walls[2]`` or ``start_poses[1] ... cannot be reached``.
 """
 
 from __future__ import annotations
@@ -35,6 +40,16 @@ from mrslam_core.sim.errors import SimError
 
 BUILTIN = Path(__file__).resolve().parent / "worlds"
 TEXTURES = ("unique", "repetitive", "plain")
+#: half the width of the simulated Pioneer's body (sim/data/pioneer3dx.urdf: 0.45 × 0.38 m): a
+#: start pose nearer than this to a solid puts the robot inside it [m]
+ROBOT_HALF_WIDTH = 0.19
+#: the clearance [m] of "reachable": a robot's centre keeps this far from every solid (passages
+#: narrower than twice this do not connect), in reachable_free and the start-pose check
+REACH_RADIUS = 0.25
+#: the raster [m] on which start poses are checked for reachability
+CHECK_RESOLUTION = 0.1
+#: walls that run along each other for more than this overlap [m]
+OVERLAP_TOLERANCE = 0.01
 
 
 @dataclass(frozen=True)
@@ -102,12 +117,8 @@ class World:
 
     def solids(self) -> list[Solid]:
         """Every wall (thickened segment, capped by half the thickness at both ends) and box."""
-        out = []
-        for k, ((x1, y1, x2, y2), h, t, tex) in enumerate(
-                zip(self.walls, self.wall_heights, self.wall_thicknesses, self.wall_textures)):
-            length = float(np.hypot(x2 - x1, y2 - y1))
-            out.append(Solid(np.array([(x1 + x2) / 2, (y1 + y2) / 2]), np.array([length / 2 + t / 2, t / 2]),
-                             float(np.arctan2(y2 - y1, x2 - x1)), float(h), tex, k))
+        out = [wall_solid(seg, t, h, tex, k) for k, (seg, h, t, tex) in
+               enumerate(zip(self.walls, self.wall_heights, self.wall_thicknesses, self.wall_textures))]
         for k, ((x, y, sx, sy, sz, yaw), tex) in enumerate(zip(self.boxes, self.box_textures)):
             out.append(Solid(np.array([x, y]), np.array([sx / 2, sy / 2]), float(yaw), float(sz), tex,
                              len(self.walls) + k))
@@ -143,16 +154,13 @@ class World:
         """
         if resolution <= 0 or inflate < 0:
             raise SimError("occupancy: need resolution > 0 and inflate >= 0")
-        h, w = self.grid_shape(resolution)
-        gx, gy = np.meshgrid((np.arange(w) + 0.5) * resolution, (np.arange(h) + 0.5) * resolution)
-        occ = np.zeros((h, w), bool)
+        occ = np.zeros(self.grid_shape(resolution), bool)
         for s in self.solids():
-            c, sn = np.cos(s.yaw), np.sin(s.yaw)
-            dx, dy = gx - s.centre[0], gy - s.centre[1]
-            occ |= (np.abs(c * dx + sn * dy) <= s.half[0] + inflate) & (np.abs(-sn * dx + c * dy) <= s.half[1] + inflate)
+            rows, cols, mask = solid_cells(s, resolution, inflate, occ.shape)
+            occ[rows, cols] |= mask
         return occ
 
-    def reachable_free(self, resolution: float, robot_radius: float = 0.25,
+    def reachable_free(self, resolution: float, robot_radius: float = REACH_RADIUS,
                        starts: np.ndarray | None = None) -> np.ndarray:
         """Free cells a robot can reach: (H, W) bool, same raster as :meth:`occupancy`.
 
@@ -163,13 +171,9 @@ class World:
         an "explored fraction of the reachable free area".
         """
         occ = self.occupancy(resolution)
-        centre_free = ~self.occupancy(resolution, inflate=robot_radius)
-        labels, _ = ndimage.label(centre_free)
+        labels = free_components(self.occupancy(resolution, inflate=robot_radius))
         starts = self.start_poses if starts is None else np.asarray(starts, float).reshape(-1, 3)
-        h, w = occ.shape
-        ij = np.floor(starts[:, [1, 0]] / resolution).astype(int)
-        inside = (ij[:, 0] >= 0) & (ij[:, 0] < h) & (ij[:, 1] >= 0) & (ij[:, 1] < w)
-        keep = np.unique(labels[ij[inside, 0], ij[inside, 1]])
+        keep = start_components(labels, starts, resolution)
         reach = np.isin(labels, keep[keep > 0])
         grow = robot_radius + resolution  # one cell more: cell centres sit up to a cell from the solids
         r = int(np.ceil(grow / resolution))
@@ -178,139 +182,270 @@ class World:
         return ndimage.binary_dilation(reach, structure=disk) & ~occ
 
 
-def _rows(path: Path, key: str, rows: Any, cols: int) -> np.ndarray:
+def wall_solid(segment, thickness: float, height: float = 0.0, texture: str = "unique", index: int = 0) -> Solid:
+    """A wall ``segment`` (x1, y1, x2, y2) [m] as the box it is: ``thickness`` wide [m], capped by
+    half of it at both ends."""
+    x1, y1, x2, y2 = segment
+    length = float(np.hypot(x2 - x1, y2 - y1))
+    return Solid(np.array([(x1 + x2) / 2, (y1 + y2) / 2]), np.array([length / 2 + thickness / 2, thickness / 2]),
+                 float(np.arctan2(y2 - y1, x2 - x1)), float(height), texture, index)
+
+
+def solid_cells(solid: Solid, resolution: float, inflate: float,
+                shape: tuple[int, int]) -> tuple[slice, slice, np.ndarray]:
+    """The cells of a (rows, cols) raster of ``shape`` (the :meth:`World.occupancy` raster)
+    whose centres lie inside ``solid`` grown by ``inflate`` [m]: (row slice, column slice, mask
+    over that window), the window clipped to the raster (possibly empty)."""
+    c, sn = np.cos(solid.yaw), np.sin(solid.yaw)
+    hx, hy = solid.half[0] + inflate, solid.half[1] + inflate
+    ex, ey = abs(c) * hx + abs(sn) * hy, abs(sn) * hx + abs(c) * hy  # half extents of the bounding box
+    x, y = solid.centre
+    i0, i1 = max(int(np.floor((y - ey) / resolution)) - 1, 0), min(int(np.ceil((y + ey) / resolution)) + 1, shape[0])
+    j0, j1 = max(int(np.floor((x - ex) / resolution)) - 1, 0), min(int(np.ceil((x + ex) / resolution)) + 1, shape[1])
+    i1, j1 = max(i1, i0), max(j1, j0)
+    gx, gy = np.meshgrid((np.arange(j0, j1) + 0.5) * resolution, (np.arange(i0, i1) + 0.5) * resolution)
+    dx, dy = gx - x, gy - y
+    mask = (np.abs(c * dx + sn * dy) <= hx) & (np.abs(-sn * dx + c * dy) <= hy)
+    return slice(i0, i1), slice(j0, j1), mask
+
+
+def free_components(blocked: np.ndarray) -> np.ndarray:
+    """4-connected components of the cells not ``blocked``: (H, W) int labels, 0 on blocked cells."""
+    labels, _ = ndimage.label(~blocked)
+    return labels
+
+
+def start_components(labels: np.ndarray, starts: np.ndarray, resolution: float,
+                     reach: float = REACH_RADIUS) -> np.ndarray:
+    """The component label (:func:`free_components`) of each start pose (S, 3): that of the free
+    cell nearest its position within ``reach`` [m] (a robot standing nearer a wall than the
+    clearance still drives off into the free space beside it); 0 where there is none or the pose
+    is off the raster."""
+    h, w = labels.shape
+    ij = np.floor(np.asarray(starts, float)[:, [1, 0]] / resolution).astype(int)
+    inside = (ij[:, 0] >= 0) & (ij[:, 0] < h) & (ij[:, 1] >= 0) & (ij[:, 1] < w)
+    ij = np.clip(ij, 0, [h - 1, w - 1])
+    dist, (ni, nj) = ndimage.distance_transform_edt(labels == 0, return_indices=True)
+    near = inside & (dist[ij[:, 0], ij[:, 1]] * resolution <= reach)
+    return np.where(near, labels[ni[ij[:, 0], ij[:, 1]], nj[ij[:, 0], ij[:, 1]]], 0)
+
+
+def _rows(src: str, key: str, rows: Any, cols: int) -> np.ndarray:
     try:
         arr = np.asarray(rows, dtype=float).reshape(-1, cols)
     except (TypeError, ValueError) as exc:
-        raise SimError(f"{path}: {key} must be a list of {cols}-number rows") from exc
+        raise SimError(f"{src}: {key} must be a list of {cols}-number rows") from exc
     if not np.isfinite(arr).all():
-        raise SimError(f"{path}: {key} has non-finite values")
+        raise SimError(f"{src}: {key} has non-finite values")
     return arr
 
 
-def _numbers(path: Path, key: str, value: Any, n: int) -> list[float]:
+def _numbers(src: str, key: str, value: Any, n: int) -> list[float]:
     try:
         out = [float(v) for v in value]
     except (TypeError, ValueError) as exc:
-        raise SimError(f"{path}: {key} must be {n} numbers") from exc
+        raise SimError(f"{src}: {key} must be {n} numbers") from exc
     if len(out) != n or not np.isfinite(out).all():
-        raise SimError(f"{path}: {key} must be {n} finite numbers")
+        raise SimError(f"{src}: {key} must be {n} finite numbers")
     return out
 
 
-def _texture(path: Path, key: str, value: Any) -> str:
+def _texture(src: str, key: str, value: Any) -> str:
     if value not in TEXTURES:
-        raise SimError(f"{path}: {key}: texture must be one of {list(TEXTURES)}, got {value!r}")
+        raise SimError(f"{src}: {key}: texture must be one of {list(TEXTURES)}, got {value!r}")
     return str(value)
 
 
-def _parse_walls(path: Path, entries: Any, height: float, thickness: float):
+def _parse_walls(src: str, entries: Any, height: float, thickness: float):
     if not isinstance(entries, list) or not entries:
-        raise SimError(f"{path}: walls must be a non-empty list")
+        raise SimError(f"{src}: walls must be a non-empty list")
     segs, hs, ts, texs = [], [], [], []
     for i, e in enumerate(entries):
         key = f"walls[{i}]"
         if isinstance(e, dict):
             extra = sorted(set(e) - {"from", "to", "height", "thickness", "texture"})
             if extra or "from" not in e or "to" not in e:
-                raise SimError(f"{path}: {key} needs from, to and optional height, thickness, texture"
+                raise SimError(f"{src}: {key} needs from, to and optional height, thickness, texture"
                                + (f" (unknown key {extra[0]})" if extra else ""))
-            segs.append(_numbers(path, f"{key}.from", e["from"], 2) + _numbers(path, f"{key}.to", e["to"], 2))
+            segs.append(_numbers(src, f"{key}.from", e["from"], 2) + _numbers(src, f"{key}.to", e["to"], 2))
             hs.append(float(e.get("height", height)))
             ts.append(float(e.get("thickness", thickness)))
-            texs.append(_texture(path, key, e.get("texture", "unique")))
+            texs.append(_texture(src, key, e.get("texture", "unique")))
         else:
             try:
-                segs.append(_numbers(path, key, e, 4))
+                segs.append(_numbers(src, key, e, 4))
             except SimError as exc:
-                raise SimError(f"{path}: walls must be a list of 4-number rows or mappings ({key})") from exc
+                raise SimError(f"{src}: walls must be a list of 4-number rows or mappings ({key})") from exc
             hs.append(height)
             ts.append(thickness)
             texs.append("unique")
         if hs[-1] <= 0 or ts[-1] <= 0:
-            raise SimError(f"{path}: {key}: height and thickness must be > 0")
+            raise SimError(f"{src}: {key}: height and thickness must be > 0")
         if np.hypot(segs[-1][2] - segs[-1][0], segs[-1][3] - segs[-1][1]) <= 0:
-            raise SimError(f"{path}: {key} has zero length")
+            raise SimError(f"{src}: {key} has zero length")
     return np.array(segs), np.array(hs), np.array(ts), texs
 
 
-def _parse_boxes(path: Path, entries: Any):
+def _parse_boxes(src: str, entries: Any):
     if entries is None:
         entries = []
     if not isinstance(entries, list):
-        raise SimError(f"{path}: boxes must be a list")
+        raise SimError(f"{src}: boxes must be a list")
     rows, texs = [], []
     for i, e in enumerate(entries):
         key = f"boxes[{i}]"
         if isinstance(e, dict):
             extra = sorted(set(e) - {"centre", "size", "yaw_deg", "texture"})
             if extra or "centre" not in e or "size" not in e:
-                raise SimError(f"{path}: {key} needs centre, size and optional yaw_deg, texture"
+                raise SimError(f"{src}: {key} needs centre, size and optional yaw_deg, texture"
                                + (f" (unknown key {extra[0]})" if extra else ""))
-            rows.append(_numbers(path, f"{key}.centre", e["centre"], 2) + _numbers(path, f"{key}.size", e["size"], 3)
+            rows.append(_numbers(src, f"{key}.centre", e["centre"], 2) + _numbers(src, f"{key}.size", e["size"], 3)
                         + [float(e.get("yaw_deg", 0.0))])
-            texs.append(_texture(path, key, e.get("texture", "unique")))
+            texs.append(_texture(src, key, e.get("texture", "unique")))
         else:
             try:
-                rows.append(_numbers(path, key, e, 6))
+                rows.append(_numbers(src, key, e, 6))
             except SimError as exc:
-                raise SimError(f"{path}: boxes must be a list of 6-number rows or mappings ({key})") from exc
+                raise SimError(f"{src}: boxes must be a list of 6-number rows or mappings ({key})") from exc
             texs.append("unique")
         if min(rows[-1][2:5]) <= 0:
-            raise SimError(f"{path}: {key}: sizes must be > 0")
+            raise SimError(f"{src}: {key}: sizes must be > 0")
     arr = np.array(rows, float).reshape(-1, 6)
     arr[:, 5] = np.radians(arr[:, 5])
     return arr, texs
 
 
-def load_world(name_or_path: str | Path) -> World:
-    """A built-in world by name (``office``, ``small``, ``hall40x30``) or a world YAML file.
+def load_world(source: str | Path | dict) -> World:
+    """A world: a built-in one by name (``office``, ``small``, ``hall40x30``, ...), a generated one
+    by a ``gen:KIND:SEED[:STARTS[:ROBOTS]]`` name (see :mod:`mrslam_core.sim.worldgen`), a world
+    YAML file, or a mapping in the YAML format. Every world is checked (:func:`check_world`).
 
     Raises:
-        SimError: unknown name, unreadable file, or a malformed field (named in the message).
+        SimError: unknown name, unreadable file, or a malformed or impossible field (named in the
+            message together with the world's file or name).
     """
-    path = Path(name_or_path)
+    if isinstance(source, dict):
+        return parse_world(source, str(source.get("name", "<mapping>")))
+    if str(source).startswith("gen:"):
+        from mrslam_core.sim import worldgen  # it builds on this module
+
+        return parse_world(worldgen.from_name(str(source)), str(source))
+    path = Path(source)
     if not path.suffix:
-        path = BUILTIN / f"{name_or_path}.yaml"
+        path = BUILTIN / f"{source}.yaml"
     if not path.is_file():
         have = sorted(q.stem for q in BUILTIN.glob("*.yaml"))
-        raise SimError(f"no world {str(name_or_path)!r} (built-in worlds: {have}, or give a YAML path)")
+        raise SimError(f"no world {str(source)!r} (built-in worlds: {have}, a gen:KIND:SEED name, or give a YAML path)")
     try:
         data = yaml.safe_load(path.read_text())
     except (OSError, yaml.YAMLError) as exc:
         raise SimError(f"{path}: cannot read it as YAML: {exc}") from exc
     if not isinstance(data, dict):
         raise SimError(f"{path}: the top level must be a mapping")
+    return parse_world(data, str(path), default_name=path.stem)
+
+
+def parse_world(data: dict, src: str, default_name: str | None = None) -> World:
+    """A world from its YAML mapping; ``src`` names it in error messages; checked by :func:`check_world`."""
     known = {"name", "size", "wall_height", "wall_thickness", "walls", "boxes", "repetitive", "start_poses"}
     unknown = sorted(set(data) - known)
     if unknown:
-        raise SimError(f"{path}: unknown key {unknown[0]} (known: {sorted(known)})")
+        raise SimError(f"{src}: unknown key {unknown[0]} (known: {sorted(known)})")
     for key in ("size", "walls", "start_poses"):
         if key not in data:
-            raise SimError(f"{path}: missing key {key}")
-    size = _numbers(path, "size", data["size"], 2)
+            raise SimError(f"{src}: missing key {key}")
+    size = _numbers(src, "size", data["size"], 2)
     if min(size) <= 0:
-        raise SimError(f"{path}: size must be [size_x, size_y] > 0")
+        raise SimError(f"{src}: size must be [size_x, size_y] > 0")
     height = float(data.get("wall_height", 2.5))
     thickness = float(data.get("wall_thickness", 0.15))
-    walls, heights, thicknesses, wall_tex = _parse_walls(path, data["walls"], height, thickness)
-    boxes, box_tex = _parse_boxes(path, data.get("boxes"))
+    walls, heights, thicknesses, wall_tex = _parse_walls(src, data["walls"], height, thickness)
+    boxes, box_tex = _parse_boxes(src, data.get("boxes"))
     try:
         repetitive = tuple(int(i) for i in data.get("repetitive") or [])
     except (TypeError, ValueError) as exc:
-        raise SimError(f"{path}: repetitive must be a list of wall indices") from exc
+        raise SimError(f"{src}: repetitive must be a list of wall indices") from exc
     if any(not 0 <= i < len(walls) for i in repetitive):
-        raise SimError(f"{path}: repetitive names a wall index outside 0..{len(walls) - 1}")
+        raise SimError(f"{src}: repetitive names a wall index outside 0..{len(walls) - 1}")
     for i in repetitive:
         wall_tex[i] = "repetitive"
     repetitive = tuple(i for i, t in enumerate(wall_tex) if t == "repetitive")
-    starts = _rows(path, "start_poses", data["start_poses"], 3)
+    starts = _rows(src, "start_poses", data["start_poses"], 3)
     if not len(starts):
-        raise SimError(f"{path}: start_poses is empty")
+        raise SimError(f"{src}: start_poses is empty")
     outside = (starts[:, 0] < 0) | (starts[:, 0] > size[0]) | (starts[:, 1] < 0) | (starts[:, 1] > size[1])
     if outside.any():
-        raise SimError(f"{path}: start pose {int(np.argmax(outside))} lies outside the world")
-    return World(name=str(data.get("name", path.stem)), size=(size[0], size[1]), wall_height=height,
-                 wall_thickness=thickness, walls=walls, boxes=boxes, repetitive=repetitive, start_poses=starts,
-                 wall_heights=heights, wall_thicknesses=thicknesses, wall_textures=tuple(wall_tex),
-                 box_textures=tuple(box_tex))
+        raise SimError(f"{src}: start_poses[{int(np.argmax(outside))}] lies outside the world")
+    world = World(name=str(data.get("name", default_name or src)), size=(size[0], size[1]), wall_height=height,
+                  wall_thickness=thickness, walls=walls, boxes=boxes, repetitive=repetitive, start_poses=starts,
+                  wall_heights=heights, wall_thicknesses=thicknesses, wall_textures=tuple(wall_tex),
+                  box_textures=tuple(box_tex))
+    check_world(world, src)
+    return world
+
+
+def check_world(world: World, src: str) -> None:
+    """Raise a :class:`SimError` naming the field (``src`` names the world) when two walls overlap
+    (run along each other for more than ``OVERLAP_TOLERANCE``, or one crosses the other's
+    interior: walls meeting at their ends or in a T are fine), a start pose lies inside a wall or
+    box grown by ``ROBOT_HALF_WIDTH``, or a start pose cannot be reached from ``start_poses[0]``
+    (``REACH_RADIUS`` clearance on a ``CHECK_RESOLUTION`` raster)."""
+    _check_walls(world, src)
+    starts = world.start_poses
+    for s in world.solids():
+        c, sn = np.cos(s.yaw), np.sin(s.yaw)
+        dx, dy = starts[:, 0] - s.centre[0], starts[:, 1] - s.centre[1]
+        inside = ((np.abs(c * dx + sn * dy) <= s.half[0] + ROBOT_HALF_WIDTH)
+                  & (np.abs(-sn * dx + c * dy) <= s.half[1] + ROBOT_HALF_WIDTH))
+        if inside.any():
+            i = int(np.argmax(inside))
+            what = f"walls[{s.index}]" if s.index < len(world.walls) else f"boxes[{s.index - len(world.walls)}]"
+            raise SimError(f"{src}: start_poses[{i}] ({starts[i, 0]:g}, {starts[i, 1]:g}) is inside {what} "
+                           f"(nearer than the robot's half width {ROBOT_HALF_WIDTH} m)")
+    labels = free_components(world.occupancy(CHECK_RESOLUTION, inflate=REACH_RADIUS))
+    comp = start_components(labels, starts, CHECK_RESOLUTION)
+    bad = np.flatnonzero((comp == 0) | (comp != comp[0]))
+    if bad.size:
+        i = int(bad[0])
+        what = "has no room around it" if comp[i] == 0 else "cannot be reached from start_poses[0]"
+        raise SimError(f"{src}: start_poses[{i}] ({starts[i, 0]:g}, {starts[i, 1]:g}) {what} (a robot needs "
+                       f"{2 * REACH_RADIUS:g} m of free width to pass)")
+
+
+def _check_walls(world: World, src: str) -> None:
+    """Collinear overlaps and crossings of wall centre lines (see :func:`check_world`)."""
+    w = world.walls
+    if len(w) < 2:
+        return
+    p, d = w[:, :2], w[:, 2:] - w[:, :2]
+    length = np.linalg.norm(d, axis=1)
+    u = d / length[:, None]
+    half = world.wall_thicknesses / 2
+    for i in range(len(w)):
+        j = np.arange(i + 1, len(w))
+        if not j.size:
+            break
+        cross = u[i, 0] * u[j, 1] - u[i, 1] * u[j, 0]
+        rel_a, rel_b = p[j] - p[i], p[j] + d[j] - p[i]
+        # parallel: both ends of j within the two half thicknesses of i's line, and an overlap along it
+        side_a = u[i, 0] * rel_a[:, 1] - u[i, 1] * rel_a[:, 0]
+        side_b = u[i, 0] * rel_b[:, 1] - u[i, 1] * rel_b[:, 0]
+        along_a, along_b = rel_a @ u[i], rel_b @ u[i]
+        overlap = np.minimum(np.maximum(along_a, along_b), length[i]) - np.maximum(np.minimum(along_a, along_b), 0.0)
+        close = np.maximum(np.abs(side_a), np.abs(side_b)) < half[i] + half[j]
+        hit = (np.abs(cross) < 1e-9) & close & (overlap > OVERLAP_TOLERANCE)
+        if hit.any():
+            k = int(j[np.argmax(hit)])
+            raise SimError(f"{src}: walls[{k}] overlaps walls[{i}] along {overlap[k - i - 1]:.2f} m")
+        # crossing: the centre lines meet inside both walls, away from either wall's ends by more
+        # than the other's half thickness (so L corners and T junctions pass)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            s_i = (rel_a[:, 0] * u[j, 1] - rel_a[:, 1] * u[j, 0]) / cross  # along i [m]
+            s_j = (rel_a[:, 0] * u[i, 1] - rel_a[:, 1] * u[i, 0]) / cross  # along j [m]
+        margin_i, margin_j = half[j] + OVERLAP_TOLERANCE, half[i] + OVERLAP_TOLERANCE
+        hit = ((np.abs(cross) >= 1e-9) & (s_i > margin_i) & (s_i < length[i] - margin_i)
+               & (s_j > margin_j) & (s_j < length[j] - margin_j))
+        if hit.any():
+            k = int(j[np.argmax(hit)])
+            x, y = p[i] + s_i[k - i - 1] * u[i]
+            raise SimError(f"{src}: walls[{k}] crosses walls[{i}] at ({x:.2f}, {y:.2f})")

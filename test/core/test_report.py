@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from mrslam_core.configio import ConfigError, from_dict, load_yaml, to_dict
-from mrslam_core.evaluation.metrics import ate_rmse, interpolate_poses, rpe_rmse
+from mrslam_core.evaluation.metrics import ate_rmse, interpolate_poses, longest_stay, rpe_rmse
 from mrslam_core.evaluation.report import write_run
 from mrslam_core.evaluation.tum import read_tum, write_tum
 from mrslam_core.pipelines.mrclam import MrclamConfig
@@ -22,6 +22,15 @@ def test_tum_round_trip(tmp_path):
     np.testing.assert_allclose(p2, poses, atol=1e-6)
     first = (tmp_path / "a.tum").read_text().splitlines()[0].split()
     assert len(first) == 8 and first[7] == "1.000000000"  # qw of yaw 0
+
+
+def test_longest_stay():
+    t = np.arange(0.0, 30.0, 0.5)
+    x = np.where(t < 10, 0.3 * t, 3.0) + np.where(t > 25, t - 25, 0.0)  # drives, waits at x = 3, drives on
+    xy = np.column_stack([x, 0.01 * np.sin(t)])
+    # from t = 9.5 (x = 2.85, within 0.2 m of 3) until 25.0 (x = 3.0; at 25.5 it is 0.65 m away)
+    assert longest_stay(t, xy, 0.2) == (pytest.approx(15.5), 19)
+    assert longest_stay(t[:1], xy[:1]) == (0.0, 0)
 
 
 def test_metrics_hand_computed():

@@ -7,6 +7,7 @@ import pytest
 
 from mrslam_core.sim import DriveConfig, SimError, StereoCameraConfig, load_world
 from mrslam_core.sim.robot import camera_extrinsic, robot_description
+from mrslam_core.sim.world import BUILTIN
 from mrslam_core.sim.scene import box_mesh
 
 
@@ -66,6 +67,43 @@ def test_bad_world_files(tmp_path, text, message):
     path.write_text(text)
     with pytest.raises(SimError, match=message):
         load_world(path)
+
+
+_OUTER = [[0, 0, 8, 0], [8, 0, 8, 4], [8, 4, 0, 4], [0, 4, 0, 0]]
+
+
+@pytest.mark.parametrize("walls, boxes, starts, message", [
+    # walls along each other, a wall crossing another's interior
+    ([[1, 2, 5, 2], [4, 2, 7, 2]], [], [[1, 1, 0]], r"walls\[5\] overlaps walls\[4\] along 1.00 m"),
+    ([[1, 2, 5, 2], [3, 1, 3, 3]], [], [[1, 1, 0]], r"walls\[5\] crosses walls\[4\] at \(3.00, 2.00\)"),
+    ([[2, 0, 2, 4.5]], [], [[1, 1, 0]], r"walls\[4\] crosses walls\[2\]"),  # through the outer wall
+    # a start pose in a wall (nearer than the robot's half width), in a box, shut off from the first
+    ([], [], [[1, 1, 0], [3, 0.2, 0]], r"start_poses\[1\] \(3, 0.2\) is inside walls\[0\]"),
+    ([], [[5, 2, 1, 1, 1, 0]], [[1, 1, 0], [5.6, 2, 0]], r"start_poses\[1\] \(5.6, 2\) is inside boxes\[0\]"),
+    ([[4, 0, 4, 4]], [], [[1, 1, 0], [6, 2, 0]], r"start_poses\[1\] \(6, 2\) cannot be reached from start_poses\[0\]"),
+    ([[4, 0, 4, 1.5], [4, 2.1, 4, 4]], [], [[1, 1, 0], [6, 2, 0]], r"start_poses\[1\] .* cannot be reached"),  # 0.5 m door
+])
+def test_impossible_worlds_name_the_field(tmp_path, walls, boxes, starts, message):
+    path = tmp_path / "w.yaml"
+    path.write_text(f"size: [8, 4]\nwall_thickness: 0.1\nwalls: {_OUTER + walls}\nboxes: {boxes}\nstart_poses: {starts}\n")
+    with pytest.raises(SimError, match=message) as err:
+        load_world(path)
+    assert str(path) in str(err.value)
+
+
+def test_corners_junctions_and_doors_pass():
+    world = load_world({"size": [8, 4], "wall_thickness": 0.1, "start_poses": [[1, 1, 0], [6, 2, 0]],
+                        "walls": [[0, 0, 4, 0], [4, 0, 8, 0], [8, 0, 8, 4], [8, 4, 0, 4], [0, 4, 0, 0],  # end to end, L
+                                  [4, 0, 4, 1.5], [4, 2.5, 4, 4],  # T junctions, a 1 m door
+                                  [6, 4, 6, 3.05]]})  # a stub ending at the wall's face
+    assert world.name == "<mapping>" and len(world.walls) == 8
+
+
+@pytest.mark.parametrize("name", sorted(p.stem for p in BUILTIN.glob("*.yaml")))
+def test_every_builtin_world_is_valid_and_connected(name):
+    world = load_world(name)
+    occ = world.occupancy(0.1)
+    assert world.reachable_free(0.1).sum() >= 0.95 * (~occ).sum()
 
 
 def test_unknown_world_name():
