@@ -150,9 +150,6 @@ class ExploreNode(Node):
                     self.get_logger().warning(msg)
                 else:
                     self.get_logger().info(msg)
-        if after["held"] > before["held"]:
-            self.get_logger().info(f"a robot waits for another in its way (keep_clear); {after['held']} commands held so far",
-                                   throttle_duration_sec=5.0)
         clock_ns = self.get_clock().now().nanoseconds
         for robot, (v, w) in commands.items():
             if clock_ns - self.pose_stamps[robot] > self.cfg.pose_timeout * 1e9:

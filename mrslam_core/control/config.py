@@ -22,13 +22,6 @@ class ControlConfig:
             :func:`~mrslam_core.control.pursuit.pure_pursuit`; measured in docs/results.md:
             fewer collisions with door frames but less area explored at first; later, on in the
             team defaults: more explored and no robot lost over 9 fresh seeds).
-        keep_clear: distance [m] between robot centres (base_link) that robots keep from each
-            other: a robot's path keeps this far from the other robots' positions where there is
-            room (see ``ExplorationConfig.path_clearance``), and a robot does not drive forward
-            (backward) while another robot's centre is within it in front of (behind) its axle;
-            it turns on the spot, waits, or is given a path around; counted as ``held``. Two
-            robots whose bodies swing out to ``r`` when turning need more than 2·r between
-            centres to turn freely (0: off).
         open_side_turns: a turn on the spot of more than ``open_side_turn`` goes the long way
             round when the short way sweeps the robot's heading past an occupied cell nearer than
             ``open_side_near`` and the long way keeps ``open_side_gain`` further from any: a
@@ -73,7 +66,6 @@ class ControlConfig:
     platform: PlatformConfig = field(default_factory=PlatformConfig)
     lookahead: float = 0.4
     keep_arc: bool = False
-    keep_clear: float = 0.0
     open_side_turns: bool = False
     open_side_turn: float = float(np.radians(120.0))
     open_side_near: float = 0.6

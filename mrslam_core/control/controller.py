@@ -1,5 +1,4 @@
-"""The team's drive commands: each robot's recovery, or its path follower, and no robot driving
-into another one's clearance."""
+"""The team's drive commands: each robot's recovery, or its path follower."""
 
 from __future__ import annotations
 
@@ -15,17 +14,6 @@ if TYPE_CHECKING:
     from mrslam_core.exploration.grid import OccupancyGrid
 
 
-def ahead_within(pose: np.ndarray, others: list[np.ndarray], distance: float, direction: float = 1.0) -> bool:
-    """Whether any of ``others`` (x, y, ...) [m] lies within ``distance`` [m] of ``pose`` (x, y, θ)
-    and on the side it drives to: in front (``direction`` > 0) or behind (< 0) of its axle."""
-    heading = np.array([np.cos(pose[2]), np.sin(pose[2])])
-    for other in others:
-        d = np.asarray(other, float)[:2] - pose[:2]
-        if np.hypot(*d) < distance and direction * float(d @ heading) > 0:
-            return True
-    return False
-
-
 class Controller:
     """(v, ω) per robot from the paths it is given (:class:`ControlConfig`). Poses (x, y, θ) [m,
     rad] and paths (N, 2) [m] are in the map frame."""
@@ -34,15 +22,6 @@ class Controller:
         self.config = config or ControlConfig()
         self.follower = Follower(self.config)
         self.recovery = Recovery(self.config)
-        #: commands held at v = 0 because another robot stood in the way (``keep_clear``)
-        self.held = 0
-
-    def robot_ahead(self, pose: np.ndarray, others: list[np.ndarray], direction: float) -> bool:
-        """Whether one of ``others`` (x, y, ...) [m] stands within ``keep_clear`` of a robot at
-        ``pose`` on the side it would drive to (``direction`` > 0 forward, < 0 backward)."""
-        if self.config.keep_clear <= 0:
-            return False
-        return ahead_within(np.asarray(pose, float), others, self.config.keep_clear, direction)
 
     def step(self, grid: OccupancyGrid, poses: dict[str, np.ndarray], paths: dict[str, np.ndarray | None],
              now: float, halt: bool = False) -> dict[str, tuple[float, float]]:
@@ -60,18 +39,14 @@ class Controller:
                 self.follower.end_turn(name)
             else:
                 commands[name] = self.follower.command(name, grid, np.asarray(poses[name], float), path, now)
-        for name, (v, w) in commands.items():
-            if v != 0.0 and self.robot_ahead(poses[name], [poses[o] for o in paths if o != name], np.sign(v)):
-                commands[name] = (0.0, w)  # never drive into another robot's clearance
-                self.held += 1
         for name, (v, _) in commands.items():
             self.recovery.record(name, poses[name], v, now)
         return commands
 
     def counters(self) -> dict[str, int]:
-        """How often each event happened so far: ``stalls``, ``held``, ``boxed_in`` (see
+        """How often each event happened so far: ``stalls``, ``boxed_in`` (see
         :class:`Recovery`), ``long_turns``, ``turn_backoffs``, ``blocked_turns`` (see
         :class:`Follower`)."""
         f, r = self.follower, self.recovery
-        return {"stalls": r.stalls, "held": self.held, "boxed_in": r.boxed_in, "long_turns": f.long_turns,
+        return {"stalls": r.stalls, "boxed_in": r.boxed_in, "long_turns": f.long_turns,
                 "turn_backoffs": f.turn_backoffs, "blocked_turns": f.blocked_turns}

@@ -133,7 +133,7 @@ def run_one(world: str, seed: int, robots: int, seconds: float | None, folder: P
         "stuck_max_s": max(m["stuck_s"] for m in robots_out.values()),
         "update_ms": latency_summary(ms) | {f"p{q}": float(np.percentile(ms, q)) if ms.size else float("nan")
                                             for q in (5, 25, 75, 99)},
-        "counters": {k: res[k] for k in ("stalls", "held", "boxed_in", "long_turns", "turn_backoffs", "blocked_turns")},
+        "counters": {k: res[k] for k in ("stalls", "boxed_in", "long_turns", "turn_backoffs", "blocked_turns")},
     }
 
 

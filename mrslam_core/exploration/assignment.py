@@ -1,5 +1,5 @@
 """Target assignment: utility discounted near assigned targets (002 eq. 8–9), the robots in
-turn (002) or the best (robot, target) pair first (Burgard et al. 2005)."""
+turn (002)."""
 
 from __future__ import annotations
 
@@ -8,15 +8,12 @@ import numpy as np
 
 def assign_targets(
     targets_xy: np.ndarray, cost: np.ndarray, beta: float, utility_range: float, coordinated: bool = True,
-    bonus: np.ndarray | None = None, best_pair: bool = False,
 ) -> np.ndarray:
     """Choose one target per robot.
 
     Coordinated, robot n takes argmax U(t | t₁…tₙ₋₁) − β·V_t^n after robots 1…n−1 (002 eq. 8,
-    the robots in list order); with ``best_pair``, the pair (robot i, target t) maximising
-    U_t − β·V_t^i over the robots not yet assigned is taken first (Burgard et al. 2005), so the
-    robot nearest a frontier gets it whatever the order. Either way the utility of targets
-    within ``utility_range`` of each assigned one is then discounted (eq. 9).
+    the robots in list order); the utility of targets within ``utility_range`` of each assigned
+    one is then discounted (eq. 9).
 
     Args:
         targets_xy: (T, 2) candidate target positions [m].
@@ -25,8 +22,6 @@ def assign_targets(
         utility_range: max_range of P(d) = 1 − d/max_range [m].
         coordinated: discount the utility after each assignment (else every robot ignores the
             others and may pick the same target).
-        bonus: (K, T) added to robot i's score of target t (a robot's current target, so that it
-            is replaced only by a clearly better one); None: 0.
 
     Returns:
         (K,) index of each robot's target, −1 where no target is reachable.
@@ -37,20 +32,16 @@ def assign_targets(
         return chosen
     utility = np.ones(t)
     reachable = np.isfinite(cost)
-    extra = np.zeros(cost.shape) if bonus is None else np.asarray(bonus, float)
     if not coordinated:
-        score = np.where(reachable, utility - beta * np.where(reachable, cost, 0.0) + extra, -np.inf)
+        score = np.where(reachable, utility - beta * np.where(reachable, cost, 0.0), -np.inf)
         ok = reachable.any(axis=1)
         chosen[ok] = np.argmax(score[ok], axis=1)
         return chosen
     open_ = reachable.any(axis=1)
     while open_.any():
-        score = np.where(reachable & open_[:, None], utility - beta * np.where(reachable, cost, 0.0) + extra, -np.inf)
-        if best_pair:
-            i, j = np.unravel_index(int(np.argmax(score)), score.shape)
-        else:
-            i = int(np.flatnonzero(open_)[0])
-            j = int(np.argmax(score[i]))
+        score = np.where(reachable & open_[:, None], utility - beta * np.where(reachable, cost, 0.0), -np.inf)
+        i = int(np.flatnonzero(open_)[0])
+        j = int(np.argmax(score[i]))
         chosen[i] = j
         open_[i] = False
         d = np.linalg.norm(targets_xy - targets_xy[j], axis=1)

@@ -55,32 +55,13 @@ class ExplorationConfig:
     Attributes:
         coordinated: discount the utility of targets near already assigned ones (eq. 8–9);
             False sends every robot to its own best frontier.
-        best_pair: assign the best (robot, target) pair first (Burgard et al. 2005) instead of
-            the robots in list order (002 eq. 8). Measured in docs/results.md: it
-            frees robots that list order sent into each other, but over 14 closed-loop seeds it
-            left more robots above 0.10 m (9 of 42 against 2 of 42).
         beta: weight of the travel cost V in argmax(U − β·V).
         utility_range: max_range of the discount P(d) = 1 − d/max_range [m].
         occ_max: cells with occupancy probability above this are not traversable.
         min_frontier_cells: smaller frontier groups are ignored.
         robot_radius: obstacles are inflated by this for planning [m].
-        target_reach: a frontier cell a robot cannot stand on (within ``robot_radius`` of an
-            obstacle: beside a wall, or amid the scattered far-range hits of a stereo camera at
-            the end of a corridor) is targeted from the nearest passable cell within this
-            distance; frontiers with none are skipped (0: only frontier cells the robot can
-            stand on are targets) [m].
         min_target_distance: frontier targets closer than this to the robot are skipped (the
             unknown just behind a robot with a forward-looking sensor is not worth a goal) [m].
-        avoid_others: frontier targets closer than ``min_target_distance`` to any robot of the
-            team are skipped, not only those near the robot itself: the ground around a robot
-            is never in view (its own camera looks ahead), so its frontier is not worth a goal,
-            and a teammate sent there drives into it (robots starting 1 m apart were sent to
-            each other's start spots and wedged against each other).
-        keep_goal: at a re-assignment, a robot's current target (the candidate nearest it,
-            within 1 m, as its frontier recedes) scores this much more for that robot, so that it
-            turns to a new target only for a clearly better one (utility units, U = 1 per
-            target; 0: every re-assignment starts afresh). Robots that swap targets at every
-            re-assignment turn on the spot, the hardest motion for a camera to track.
         goal_tolerance: a goal counts as reached within this distance [m].
         replan_period: re-assign targets at least this often [s].
         replan_new_area: re-assign sooner (at most once a second) when this much new area has
@@ -100,15 +81,6 @@ class ExplorationConfig:
             this many times a step into an observed one (>= 1; 1: no difference): paths keep to
             space seen free where the detour is short, instead of cutting across the unseen
             ground beside the robot, where a stereo camera looking ahead has not seen the wall.
-        path_clearance: a robot's path keeps this far [m] from the other robots' positions
-            where there is room (else the plain path is kept), without the holding of
-            ``ControlConfig.keep_clear``.
-            The occupancy grid leaves teammates out (``GridConfig.teammate_radius``); without
-            this, paths ran through them: two robots crossing at the start drove into each other
-            and stood wedged for the rest of the run (docs/results.md). Measured
-            there at 0.8 m over 14 fresh closed-loop seeds: no wedge and more explored (65
-            against 56 %), but more robots above 0.10 m (9 of 42 against 4 of 42), so off.
-            The larger of this and ``ControlConfig.keep_clear`` is used; 0: off.
         start_delay: each robot stands still this long from its first pose on, so that the map
             is started from the known start poses: before a robot's first landmarks nothing can
             tell its particles' motion noise apart, and the landmarks it maps first fix the
@@ -117,16 +89,12 @@ class ExplorationConfig:
     """
 
     coordinated: bool = True
-    best_pair: bool = False
     beta: float = 1.0
     utility_range: float = 4.0
     occ_max: float = 0.65
     min_frontier_cells: int = 5
     robot_radius: float = 0.35
-    target_reach: float = 0.0
     min_target_distance: float = 1.0
-    avoid_others: bool = False
-    keep_goal: float = 0.0
     goal_tolerance: float = 0.4
     replan_period: float = 4.0
     replan_new_area: float = 4.0
@@ -137,7 +105,6 @@ class ExplorationConfig:
     return_to_start: bool = False
     unknown_passable: bool = True
     unknown_cost: float = 1.0
-    path_clearance: float = 0.0
     start_delay: float = 0.0
 
     def __post_init__(self) -> None:

@@ -13,14 +13,9 @@ from mrslam_core.control.controller import Controller
 from mrslam_core.exploration.assignment import assign_targets
 from mrslam_core.exploration.config import ExplorationConfig
 from mrslam_core.exploration.cost import travel_cost
-from mrslam_core.exploration.frontiers import frontier_cells, frontier_groups, frontier_targets, standing_cells
+from mrslam_core.exploration.frontiers import frontier_cells, frontier_groups, frontier_targets
 from mrslam_core.exploration.grid import OccupancyGrid
 from mrslam_core.exploration.planning import astar, inflate
-
-
-#: candidate targets within this of a robot's current target count as that target (``keep_goal``);
-#: the candidates along a frontier are 1 m apart [m]
-KEEP_RADIUS = 1.0
 
 
 class State(Enum):
@@ -47,7 +42,7 @@ def surroundings(grid: OccupancyGrid, xy: np.ndarray, robot_radius: float) -> np
 
 def disc_cells(grid: OccupancyGrid, centres: list[np.ndarray], radius: float) -> np.ndarray:
     """(H, W) bool: the cells within ``radius`` [m] of any of ``centres``, each (x, y) [m] map
-    frame (bumper hits, other robots)."""
+    frame (bumper hits)."""
     out = np.zeros(grid.shape, bool)
     for xy in centres:
         out |= surroundings(grid, xy, radius - 2 * grid.res)
@@ -128,17 +123,13 @@ class Explorer:
         self.last_plan_s = now
         self.known_at_plan = int(grid.observed.sum())
         passable, prob = planning_layers(grid, [poses[n] for n in self.robots], cfg, self.bumps, self._bump_radius)
-        if cfg.target_reach <= 0:
-            frontier &= passable  # a frontier the robot cannot stand on (hugging a wall) is not a goal
+        frontier &= passable  # a frontier the robot cannot stand on (hugging a wall) is not a goal
         waiting = False  # a frontier blocked only for now will be tried again: not complete yet
-        blocked, for_now = [], []  # blacklist entries in force: (x, y) [m], and whether only for a while
         if self.blacklist:
             centres = grid.centre_of(np.argwhere(frontier))
             bad = np.zeros(len(centres), bool)
             for b, (fails, until) in zip(self.blacklist, self.strikes):
                 if fails >= cfg.max_strikes or now < until:
-                    blocked.append(b)
-                    for_now.append(fails < cfg.max_strikes)
                     near = np.linalg.norm(centres - b, axis=1) < cfg.blacklist_radius
                     bad |= near
                     waiting |= fails < cfg.max_strikes and int(near.sum()) >= cfg.min_frontier_cells
@@ -146,12 +137,6 @@ class Explorer:
             frontier[fc[:, 0], fc[:, 1]] = False
         groups = frontier_groups(frontier, cfg.min_frontier_cells)
         targets = frontier_targets(groups, max(1, int(round(1.0 / grid.res)))) if groups else np.zeros((0, 2), np.int64)
-        if cfg.target_reach > 0 and len(targets):
-            targets = standing_cells(targets, passable, cfg.target_reach / grid.res)
-            if blocked and len(targets):  # a standing cell may lie off its frontier's blacklisted cells
-                near = np.linalg.norm(grid.centre_of(targets)[:, None] - np.array(blocked)[None], axis=2) < cfg.blacklist_radius
-                waiting |= bool(near[:, np.array(for_now)].any())  # near: (T, B)
-                targets = targets[~near.any(axis=1)]
         self.frontiers = grid.centre_of(targets) if len(targets) else np.zeros((0, 2))
         if not len(targets) and free.any() and not waiting:
             if self.state is State.EXPLORING:
@@ -168,19 +153,8 @@ class Explorer:
         txy = grid.centre_of(targets)
         robot_xy = np.array([poses[n][:2] for n in self.robots])
         near = np.linalg.norm(txy[None] - robot_xy[:, None], axis=2) < cfg.min_target_distance  # (R, T)
-        if cfg.avoid_others:  # the unseen ground around any robot: another one would drive into it
-            near = np.broadcast_to(near.any(axis=0), near.shape)
         far_cost = np.where(near, np.inf, cost)
-        bonus = None
-        if cfg.keep_goal > 0:  # a robot's current target, or the candidate that replaces it as the frontier recedes
-            bonus = np.zeros(cost.shape)
-            for i, name in enumerate(self.robots):
-                g = self.goals.get(name)
-                if g is not None and self.state is State.EXPLORING:
-                    d = np.linalg.norm(txy - g.target, axis=1)
-                    if d.min() <= KEEP_RADIUS:
-                        bonus[i, int(np.argmin(d))] = cfg.keep_goal
-        chosen = assign_targets(txy, far_cost, cfg.beta, cfg.utility_range, cfg.coordinated, bonus, cfg.best_pair)
+        chosen = assign_targets(txy, far_cost, cfg.beta, cfg.utility_range, cfg.coordinated)
         for i in np.flatnonzero(chosen < 0):  # only near frontiers left: turn and look at them
             if np.isfinite(cost[i]).any():
                 chosen[i] = int(np.argmin(cost[i]))
@@ -204,17 +178,8 @@ class Explorer:
         cfg = self.config
         near = surroundings(grid, poses[name][:2], cfg.robot_radius)
         leave = near & ~grid.occupied() & ~disc_cells(grid, self.bumps, self._bump_radius)
-        others = [np.asarray(poses[o])[:2] for o in self.robots if o != name]
         cost = np.where(grid.observed, 1.0, cfg.unknown_cost) if cfg.unknown_cost > 1 else None
-        path = None
-        clearance = max(self.controller.config.keep_clear, cfg.path_clearance)
-        if clearance > 0 and others:
-            # around the other robots where there is room; else the plain path, on which the
-            # follower waits for a robot in the way (keep_clear, see Controller.step)
-            crowd = disc_cells(grid, others, clearance)
-            path = astar((passable & ~crowd) | (leave & ~disc_cells(grid, others, clearance / 2)), start, goal, cost)
-        if path is None:
-            path = astar(passable | leave, start, goal, cost)
+        path = astar(passable | leave, start, goal, cost)
         if path is None:
             self.goals[name] = None
             if reaches_any(passable | leave, start, grid.cell_of(np.asarray(targets, float).reshape(-1, 2))):
@@ -266,9 +231,8 @@ class Explorer:
             due = True  # the map changed: frontiers may have moved
         for name in self.robots:
             g = self.goals.get(name)
-            others = [poses[o] for o in self.robots if o != name]
-            if g is None or self.controller.robot_ahead(poses[name], others, 1.0):
-                due |= now - self.last_plan_s >= 1.0  # idle or held robots ask again, at most once a second
+            if g is None:
+                due |= now - self.last_plan_s >= 1.0  # idle robots ask again, at most once a second
             if g is None:
                 continue
             d = float(np.linalg.norm(poses[name][:2] - g.target))

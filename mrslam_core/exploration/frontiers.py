@@ -40,29 +40,3 @@ def frontier_targets(groups: list[np.ndarray], stride: int) -> np.ndarray:
             out.extend(cells[coarse])
     return unique_rows(np.array(out, dtype=np.int64).reshape(-1, 2))
 
-
-def standing_cells(targets: np.ndarray, passable: np.ndarray, reach_cells: float) -> np.ndarray:
-    """Where a robot stands to look at each target: the passable cell nearest it.
-
-    A frontier cell beside a wall, or amid the scattered hits of a stereo camera's far range,
-    lies inside the inflated obstacles; its frontier is still worth a visit from the nearest cell
-    a robot can stand on.
-
-    Args:
-        targets: (T, 2) target cells (row, col).
-        passable: (H, W) bool, cells a robot may stand on.
-        reach_cells: the standing cell may be at most this far from its target [cells].
-
-    Returns:
-        (T', 2) the standing cells of the targets that have one within reach, in the targets'
-        order, each once.
-    """
-    targets = np.asarray(targets, np.int64).reshape(-1, 2)
-    if not len(targets) or not passable.any():
-        return np.zeros((0, 2), np.int64)
-    dist, (rows, cols) = ndimage.distance_transform_edt(~passable, return_indices=True)
-    r, c = targets[:, 0], targets[:, 1]
-    cells = np.stack([rows[r, c], cols[r, c]], axis=1)[dist[r, c] <= reach_cells]
-    if not len(cells):
-        return cells
-    return cells[np.sort(unique_rows(cells, return_index=True)[1])]

@@ -50,66 +50,17 @@ def test_assignment_spreads_robots():
     assert assign_targets(targets, unreachable, 0.5, 4.0).tolist() == [-1]
 
 
-def test_the_best_robot_target_pair_is_assigned_first_whatever_the_robots_order():
+def test_robots_are_assigned_in_list_order():
     # target 0 is beside robot 1; robot 0, listed first, is 1 m from it and 1.2 m from target 1
     targets = np.array([[0.0, 0.0], [8.0, 0.0]])
     cost = np.array([[1.0, 1.2], [0.1, 3.0]])
-    # pair scores U - 0.5 V: (1, 0) 0.95 first; then target 0's utility is 0, robot 0 takes 1 (0.4 > -0.5)
-    assert assign_targets(targets, cost, beta=0.5, utility_range=4.0, best_pair=True).tolist() == [1, 0]
-    assert assign_targets(targets, cost[::-1], beta=0.5, utility_range=4.0, best_pair=True).tolist() == [0, 1]
     # in list order (002 eq. 8) robot 0 takes target 0 (0.5 > 0.4); target 1 then scores -0.5 for
     # robot 1 and target 0 (utility 0) -0.05: both sent to target 0
     assert assign_targets(targets, cost, beta=0.5, utility_range=4.0).tolist() == [0, 0]
     # a robot that reaches nothing gets no target; the others are still assigned
     cost3 = np.vstack([cost, np.full(2, np.inf)])
-    for best_pair in (False, True):
-        assert assign_targets(targets, cost3, 0.5, 4.0, best_pair=best_pair)[2] == -1
-        assert assign_targets(np.zeros((0, 2)), np.zeros((2, 0)), 0.5, 4.0, best_pair=best_pair).tolist() == [-1, -1]
-
-
-def test_a_bonus_keeps_a_robots_target_unless_another_is_clearly_better():
-    targets = np.array([[0.0, 0.0], [5.0, 0.0]])
-    cost = np.array([[0.5, 0.3]])  # target 1 scores 0.2 better
-    assert assign_targets(targets, cost, beta=1.0, utility_range=4.0).tolist() == [1]
-    kept = np.array([[0.3, 0.0]])  # the robot is on its way to target 0
-    assert assign_targets(targets, cost, 1.0, 4.0, bonus=kept).tolist() == [0]
-    assert assign_targets(targets, np.array([[0.8, 0.3]]), 1.0, 4.0, bonus=kept).tolist() == [1]  # 0.5 better
-
-
-def test_the_explorer_keeps_a_robots_target_against_a_marginally_better_one():
-    """robot1 drives west to the frontier at x = 1 m. Then a small unseen patch shows up 1 m behind
-    it (x 3.4–3.8 m, y 1–2 m), a frontier a little nearer than the one it drives to: without
-    ``keep_goal`` it turns round for it, with ``keep_goal`` it keeps its target."""
-    from mrslam_core.exploration.explorer import Explorer
-
-    def room(patch: bool) -> OccupancyGrid:
-        grid = OccupancyGrid(GridConfig(resolution=0.1), extent=((0.0, 0.0), (8.0, 3.0)))
-        grid.observed[:, 10:60] = True  # x 1–6 m seen free
-        if patch:
-            grid.observed[10:20, 34:38] = False
-        grid.logodds[grid.observed] = -3.0
-        return grid
-
-    for keep, turns in ((0.0, True), (0.3, False)):
-        ex = Explorer(ExplorationConfig(robot_radius=0.2, keep_goal=keep), ["robot1"])
-        ex.step(room(False), {"robot1": np.array([2.5, 1.5, np.pi])}, 0.0)
-        assert ex.goals["robot1"].target[0] < 1.5  # west, the nearer frontier
-        ex.step(room(True), {"robot1": np.array([2.3, 1.5, np.pi])}, 5.0)
-        assert (ex.goals["robot1"].target[0] > 3.0) == turns, (keep, ex.goals["robot1"].target)
-
-
-def test_a_frontier_cell_inside_an_obstacles_inflation_is_visited_from_the_nearest_passable_cell():
-    from mrslam_core.exploration.frontiers import standing_cells
-
-    passable = np.ones((10, 10), bool)
-    passable[:, 6:] = False  # inflated wall: columns 6-9
-    targets = np.array([[2, 7], [2, 8], [5, 9], [4, 3]])
-    cells = standing_cells(targets, passable, reach_cells=2.5)
-    # (2, 7) -> (2, 5) at 2 cells; (2, 8) -> (2, 5) too (3 cells: beyond reach, left out);
-    # (5, 9) is 4 cells away: left out; (4, 3) stands where it is
-    assert cells.tolist() == [[2, 5], [4, 3]]
-    assert standing_cells(targets, passable, reach_cells=3.0).tolist() == [[2, 5], [4, 3]]  # (2, 8) once
-    assert standing_cells(targets, np.zeros((10, 10), bool), 5.0).shape == (0, 2)
+    assert assign_targets(targets, cost3, 0.5, 4.0)[2] == -1
+    assert assign_targets(np.zeros((0, 2)), np.zeros((2, 0)), 0.5, 4.0).tolist() == [-1, -1]
 
 
 def test_frontiers_on_a_known_map():
@@ -337,63 +288,6 @@ def test_a_robot_that_follows_its_commands_never_stalls():
     assert ex.bumps == [] and ex.strikes == [] and pose[0] > 2.0
 
 
-@pytest.mark.parametrize(("keep_clear", "path_clearance"), [(0.0, 0.0), (0.9, 0.0), (0.0, 0.9), (0.9, 0.5)])
-def test_a_path_keeps_clear_of_another_robot_where_there_is_room(keep_clear, path_clearance):
-    """robot1 at (0.5, 2.0) is sent to the frontier at x = 4 m; robot2 stands at (2.0, 2.0), on
-    the straight line. With ``keep_clear`` or ``path_clearance`` (the larger of them) the path
-    keeps 0.9 m from robot2's centre (the disc is exact to one cell); without either it runs
-    through robot2."""
-    from mrslam_core.exploration.explorer import Explorer, planning_layers
-
-    grid = _open_room()
-    cfg = ExplorationConfig(robot_radius=0.2, min_target_distance=0.5, path_clearance=path_clearance)
-    ex = Explorer(cfg, ["robot1", "robot2"], Controller(ControlConfig(keep_clear=keep_clear)))
-    poses = {"robot1": np.array([0.5, 2.0, 0.0]), "robot2": np.array([2.0, 2.0, np.pi / 2])}
-    passable, _ = planning_layers(grid, list(poses.values()), cfg)
-    ex._set_goal("robot1", np.array([3.95, 2.05]), grid, passable, poses, 0.0, np.array([[3.95, 2.05]]))
-    d = np.linalg.norm(ex.goals["robot1"].path - poses["robot2"][:2], axis=1)
-    if keep_clear or path_clearance:
-        assert d.min() >= 0.9 - grid.res / 2, d.min()
-    else:
-        assert d.min() < 0.1, d.min()
-
-
-def test_a_path_through_another_robot_is_kept_when_there_is_no_room_around_it():
-    """In a 1 m wide corridor a robot 1.5 m ahead leaves no room for 0.9 m clearance: the goal
-    keeps its plain path (the follower waits for the other robot instead of giving the goal up)."""
-    from mrslam_core.exploration.explorer import Explorer, planning_layers
-
-    grid = OccupancyGrid(GridConfig(resolution=0.1), extent=((0.0, 0.0), (6.0, 4.0)))
-    grid.observed[15:25, :] = True
-    grid.logodds[15:25, :] = -3.0
-    cfg = ExplorationConfig(robot_radius=0.2)
-    ex = Explorer(cfg, ["robot1", "robot2"], Controller(ControlConfig(keep_clear=0.9)))
-    poses = {"robot1": np.array([0.5, 2.0, 0.0]), "robot2": np.array([2.0, 2.0, 0.0])}
-    passable, _ = planning_layers(grid, list(poses.values()), cfg)
-    ex._set_goal("robot1", np.array([5.0, 2.0]), grid, passable, poses, 0.0, np.array([[5.0, 2.0]]))
-    assert ex.goals["robot1"] is not None and ex.strikes == []
-
-
-def test_the_follower_holds_a_robot_that_would_drive_into_another():
-    """robot1 at (0.5, 2.0) facing east is given a straight path to the frontier while robot2 is
-    far away; 0.2 s later robot2 stands 0.6 m in front of it: robot1 gets v = 0 (it may still
-    turn). robot2 0.6 m behind or 0.8 m beside it: robot1 drives on. Off (keep_clear = 0): robot1
-    drives into robot2."""
-    from mrslam_core.exploration.explorer import Explorer
-
-    grid = _open_room()
-    me = np.array([0.5, 2.0, 0.0])
-    for keep_clear, other, moves in [(0.9, [1.1, 2.0], False), (0.9, [-0.1, 2.0], True),
-                                     (0.9, [0.5, 2.8], True), (0.0, [1.1, 2.0], True)]:
-        ex = Explorer(ExplorationConfig(robot_radius=0.2, min_target_distance=0.5), ["robot1", "robot2"],
-                      Controller(ControlConfig(keep_clear=keep_clear)))
-        v, _ = ex.step(grid, {"robot1": me, "robot2": np.array([0.3, 3.8, 0.0])}, 0.0)["robot1"]
-        assert v > 0.05
-        v, _ = ex.step(grid, {"robot1": me, "robot2": np.array([*other, np.pi])}, 0.2)["robot1"]
-        assert (v > 0.05) == moves, (keep_clear, other, v)
-        assert ex.controller.held == (0 if moves else 1)
-
-
 def test_robots_stand_still_at_the_start_for_start_delay():
     """With start_delay 1 s a robot gets (0, 0) for its first second, counted from its own first
     pose (a robot heard later waits from then), and then drives to its goal."""
@@ -423,24 +317,6 @@ def test_a_cost_on_unseen_cells_keeps_the_path_in_seen_space():
     assert astar(passable, (5, 0), (5, 10), np.where(seen, 1.0, 1.5)) == straight
     with pytest.raises(ValueError):
         ExplorationConfig(unknown_cost=0.5)
-
-
-@pytest.mark.parametrize("avoid_others", [False, True])
-def test_a_robot_is_not_sent_to_the_unseen_ground_around_a_teammate(avoid_others):
-    """robot2 stands 0.5 m before the frontier along x = 4 m, straight ahead of robot1. Without
-    ``avoid_others`` robot1 is sent to the frontier just behind robot2 (the shortest way); with
-    it, to a part of the frontier at least ``min_target_distance`` (1 m) from robot2. Targets
-    are chosen uncoordinated, so that the discount of robot2's own target does not decide it."""
-    from mrslam_core.exploration.explorer import Explorer
-
-    grid = _open_room()
-    cfg = ExplorationConfig(robot_radius=0.2, avoid_others=avoid_others, coordinated=False)
-    ex = Explorer(cfg, ["robot1", "robot2"])
-    poses = {"robot1": np.array([0.5, 2.0, 0.0]), "robot2": np.array([3.5, 2.0, 0.0])}
-    ex.step(grid, poses, 0.0)
-    d = float(np.linalg.norm(ex.goals["robot1"].target - poses["robot2"][:2]))
-    assert (d >= 1.0) == avoid_others, d
-
 
 
 def test_the_follower_backs_away_then_turns_without_checking_again(wall_south):
