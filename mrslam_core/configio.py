@@ -11,6 +11,7 @@ from __future__ import annotations
 import copy
 import dataclasses
 import functools
+import sys
 import types
 import typing
 from pathlib import Path
@@ -177,9 +178,16 @@ def load_yaml(cls: type[T], path: str | Path) -> T:
         raise ConfigError(f"{path}: {exc}") from exc
 
 
+def _profiles_dir() -> Path:
+    """config/ of the checkout (a source tree or an editable install), else share/mrslam/config of
+    the environment the package is installed in (pyproject.toml's data-files put it there)."""
+    checkout = Path(__file__).resolve().parents[1] / "config"
+    return checkout if checkout.is_dir() else Path(sys.prefix) / "share" / "mrslam" / "config"
+
+
 #: the folder of the named profiles: sim_team.yaml (the simulated team), real_stereo.yaml (a robot
-#: with a real stereo head), mrclam.yaml (the MR.CLAM filter)
-PROFILES = Path(__file__).resolve().parents[1] / "config"
+#: with a real stereo head), mrclam.yaml (the MR.CLAM filter), and the launch files
+PROFILES = _profiles_dir()
 
 
 def _profile_parameters(path: Path) -> dict:

@@ -122,3 +122,13 @@ def test_shipped_files_load(pattern, load):
 def test_every_shipped_config_file_has_a_loader_here():
     covered = {p for pattern, _ in LOADERS for p in REPO.glob(pattern)}
     assert _shipped() - covered == set(), "add a loader for these to LOADERS"
+
+
+def test_an_installed_package_carries_the_config_folder():
+    """pyproject.toml installs every file of config/ into share/mrslam/config, where
+    configio.PROFILES looks when the package does not run from a checkout."""
+    import tomllib
+
+    data_files = tomllib.loads((REPO / "pyproject.toml").read_text())["tool"]["setuptools"]["data-files"]
+    installed = {p for pattern in data_files["share/mrslam/config"] for p in REPO.glob(pattern)}
+    assert installed == {p for p in (REPO / "config").iterdir() if p.is_file()}
