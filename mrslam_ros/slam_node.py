@@ -189,7 +189,9 @@ class SlamNode(Node):
             self._adapt_timer = self.create_timer(0.2, self.adapt_inputs, clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.unknown: set[str] = set()
         self.latency_ms: deque[float] = deque(maxlen=100_000)
-        self._merges_logged = self._relocs_logged = self._restarts_logged = 0
+        # what a resumed mapper logged before its checkpoint is not logged again
+        self._merges_logged, self._relocs_logged, self._restarts_logged = (
+            len(self.mapper.merges), len(self.mapper.relocalizations), len(self.mapper.restarts))
         self.create_timer(self.cfg.map_period, self.on_timer)
         self.create_timer(self.cfg.process_period, self.on_process, clock=Clock(clock_type=ClockType.STEADY_TIME))
         if self.cfg.checkpoint:

@@ -18,6 +18,9 @@ checkpoint intact.
 
 from __future__ import annotations
 
+import dataclasses
+import typing
+
 import json
 import os
 import tempfile
@@ -38,10 +41,12 @@ from mrslam_core.slam.models import ObservationModel
 from mrslam_core.slam.tracks import TrackMemory
 
 FORMAT = "mrslam-filter-checkpoint"
-FORMAT_VERSION = 2
+FORMAT_VERSION = 3
 #: versions this mrslam reads: 1 stored the landmark store's one-level chunk table (regrouped
-#: into nodes on load), 2 its two-level table (:meth:`LandmarkStore.state`)
-READ_VERSIONS = (1, 2)
+#: into nodes on load), 2 its two-level table (:meth:`LandmarkStore.state`), 3 the same filter
+#: members with the central mapper's state by part in ``extra``, local filters included
+#: (:mod:`mrslam_core.pipelines.central`; it still resumes from a version 2 file)
+READ_VERSIONS = (1, 2, 3)
 
 #: Filter arrays saved as ``filter.<name>``.
 FILTER_ARRAYS = ("poses", "log_w", "score")
@@ -78,6 +83,42 @@ def _json_default(value: Any) -> Any:
     raise TypeError(f"{type(value).__name__} is not JSON serialisable")
 
 
+def filter_state(filter: MultiRobotFastSLAM) -> dict[str, Any]:
+    """The filter's complete state as plain values: ``header``, a JSON-able dict (config, model,
+    robots, last stamps, drop counters, scalar attributes, track memory counters, the bit
+    generator's state, the store's sizes), and every array by its member name (``filter.*``,
+    ``store.*``, ``attr.*``, ``dict.*``, ``tracks.*``; see docs/checkpoint.md). A checkpoint
+    file is this plus the format fields and the caller's extra values; :func:`filter_from_state`
+    rebuilds the filter.
+
+    Raises:
+        CheckpointError: a filter attribute that cannot be stored without pickle.
+    """
+    store = filter.landmarks
+    arrays: dict[str, np.ndarray] = {}
+    for name in FILTER_ARRAYS:
+        arrays[f"filter.{name}"] = np.asarray(getattr(filter, name))
+    for name, value in store.state().items():
+        arrays[f"store.{name}"] = value
+    attributes = _other_state(filter, arrays)
+    for k, memory in filter.tracks.items():
+        for name in TRACK_ARRAYS:
+            arrays[f"tracks.{k}.{name}"] = getattr(memory, name)
+    header = {
+        "config": to_dict(filter.config),
+        "model": filter.model.name,
+        "robots": list(filter.robots),
+        "last_stamp_ns": {name: int(t) for name, t in filter.last_stamp.items()},
+        "dropped": {str(k): int(v) for k, v in filter.dropped.items()},
+        "attributes": attributes,
+        "tracks": {str(k): memory.sets for k, memory in filter.tracks.items()},
+        "rng": filter.rng.bit_generator.state,
+        "store": {"dim": int(store.dim), "chunk": int(store.chunk), "fanout": int(store.fanout),
+                  "descriptor_dim": int(store.descriptor_dim), "size": int(store.size)},
+    }
+    return {"header": header, **arrays}
+
+
 def save_checkpoint(filter: MultiRobotFastSLAM, path: str | Path, extra: dict[str, Any] | None = None) -> Path:
     """Write the filter's complete state to ``path`` atomically.
 
@@ -95,16 +136,8 @@ def save_checkpoint(filter: MultiRobotFastSLAM, path: str | Path, extra: dict[st
         CheckpointError: ``extra`` holds something that cannot be stored without pickle.
     """
     path = Path(path)
-    store = filter.landmarks
-    arrays: dict[str, np.ndarray] = {}
-    for name in FILTER_ARRAYS:
-        arrays[f"filter.{name}"] = np.asarray(getattr(filter, name))
-    for name, value in store.state().items():
-        arrays[f"store.{name}"] = value
-    attributes = _other_state(filter, arrays)
-    for k, memory in filter.tracks.items():
-        for name in TRACK_ARRAYS:
-            arrays[f"tracks.{k}.{name}"] = getattr(memory, name)
+    state = filter_state(filter)
+    arrays: dict[str, np.ndarray] = {k: v for k, v in state.items() if k != "header"}
     extra_json: dict[str, Any] = {}
     for key, value in (extra or {}).items():
         if not isinstance(key, str):
@@ -119,16 +152,7 @@ def save_checkpoint(filter: MultiRobotFastSLAM, path: str | Path, extra: dict[st
         "format": FORMAT,
         "version": FORMAT_VERSION,
         "written_unix_s": time.time(),
-        "config": to_dict(filter.config),
-        "model": filter.model.name,
-        "robots": list(filter.robots),
-        "last_stamp_ns": {name: int(t) for name, t in filter.last_stamp.items()},
-        "dropped": {str(k): int(v) for k, v in filter.dropped.items()},
-        "attributes": attributes,
-        "tracks": {str(k): memory.sets for k, memory in filter.tracks.items()},
-        "rng": filter.rng.bit_generator.state,
-        "store": {"dim": int(store.dim), "chunk": int(store.chunk), "fanout": int(store.fanout),
-                  "descriptor_dim": int(store.descriptor_dim), "size": int(store.size)},
+        **state["header"],
         "extra": extra_json,
         "extra_arrays": sorted(k[len("extra."):] for k in arrays if k.startswith("extra.")),
     }
@@ -266,23 +290,56 @@ def load_checkpoint(
         CheckpointError: not a checkpoint, another format version, or inconsistent content.
     """
     header, arrays = _read(path)
+    slam = filter_from_state({"header": header, **arrays}, model, path)
     try:
-        config = from_dict(FilterConfig, header["config"])
-    except ConfigError as exc:
-        raise CheckpointError(f"{path}: saved config: {exc}") from exc
-    except KeyError as exc:
-        raise CheckpointError(f"{path}: header lacks {exc}") from exc
-    try:
-        return _rebuild(path, header, arrays, config, model)
+        extra = dict(header["extra"])
+        for key in header["extra_arrays"]:
+            extra[key] = np.array(arrays[f"extra.{key}"])
     except KeyError as exc:
         raise CheckpointError(f"{path}: missing {exc}") from exc
+    return slam, extra
+
+
+def filter_from_state(state: dict[str, Any], model: ObservationModel | None = None,
+                      source: str | Path = "filter state") -> MultiRobotFastSLAM:
+    """The filter :func:`filter_state` described, in exactly that state.
+
+    Args:
+        state: ``header`` and the arrays by member name, as :func:`filter_state` returns them
+            (other members are ignored).
+        model: as for :func:`load_checkpoint`.
+        source: where the state comes from, for error messages.
+
+    Raises:
+        CheckpointError: a missing or inconsistent member.
+    """
+    try:
+        header = state["header"]
+        config = from_dict(FilterConfig, _known_keys(FilterConfig, header["config"]))
+    except ConfigError as exc:
+        raise CheckpointError(f"{source}: saved config: {exc}") from exc
+    except KeyError as exc:
+        raise CheckpointError(f"{source}: header lacks {exc}") from exc
+    try:
+        return _rebuild(source, header, state, config, model)
+    except KeyError as exc:
+        raise CheckpointError(f"{source}: missing {exc}") from exc
     except (TypeError, ValueError, IndexError, AttributeError) as exc:
         if isinstance(exc, CheckpointError):
             raise
-        raise CheckpointError(f"{path}: {exc}") from exc
+        raise CheckpointError(f"{source}: {exc}") from exc
 
 
-def _rebuild(path, header, arrays, config, model) -> tuple[MultiRobotFastSLAM, dict[str, Any]]:
+def _known_keys(cls, data):
+    """``data`` without the keys ``cls`` (a config dataclass, nested) no longer has: a checkpoint
+    written before an option was removed still resumes (the option was off, or it is gone for good)."""
+    if not (dataclasses.is_dataclass(cls) and isinstance(data, dict)):
+        return data
+    hints = typing.get_type_hints(cls)
+    return {f.name: _known_keys(hints[f.name], data[f.name]) for f in dataclasses.fields(cls) if f.name in data}
+
+
+def _rebuild(path, header, arrays, config, model) -> MultiRobotFastSLAM:
     robots = [str(r) for r in header["robots"]]
     k, m = len(robots), config.num_particles
     if model is not None and model.name != header["model"]:
@@ -318,10 +375,7 @@ def _rebuild(path, header, arrays, config, model) -> tuple[MultiRobotFastSLAM, d
     gen.state = state
     slam.rng = np.random.Generator(gen)
     slam.landmarks = _rebuild_store(path, header["store"], arrays, m)
-    extra = dict(header["extra"])
-    for key in header["extra_arrays"]:
-        extra[key] = np.array(arrays[f"extra.{key}"])
-    return slam, extra
+    return slam
 
 
 def _rebuild_store(path, meta: dict[str, Any], arrays: dict[str, np.ndarray], m: int) -> LandmarkStore:

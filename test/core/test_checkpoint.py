@@ -138,7 +138,7 @@ def test_file_is_plain_npz_and_write_is_atomic(tmp_path):
         assert all(data[name].dtype != object for name in data.files)
         assert data["filter.poses"].shape == (4, 1, 3)
     header = read_header(path)
-    assert header["version"] == 2 and header["robots"] == ["a"] and header["extra"] == {"note": "first"}
+    assert header["version"] == 3 and header["robots"] == ["a"] and header["extra"] == {"note": "first"}
     assert header["config"]["num_particles"] == 4
     # an extra value that would need pickle: error, and the previous checkpoint is intact
     with pytest.raises(CheckpointError):
@@ -177,3 +177,21 @@ def test_bad_files_give_checkpoint_error(tmp_path):
     np.savez(tmp_path / "v99.npz", **dict(arrays, header=np.frombuffer(json.dumps(header).encode(), np.uint8)))
     with pytest.raises(CheckpointError, match="version"):
         load_checkpoint(tmp_path / "v99.npz")
+
+
+def test_a_checkpoint_of_a_removed_option_still_loads(tmp_path):
+    """A checkpoint written while the config had an option since removed (off, or gone for good)
+    resumes with the current config."""
+    import json
+
+    slam = MultiRobotFastSLAM(FilterConfig(num_particles=10, seed=1), ["a"], np.zeros((1, 3)))
+    path = save_checkpoint(slam, tmp_path / "old.npz")
+    with np.load(path) as z:
+        arrays = {k: z[k] for k in z.files}
+    header = json.loads(arrays["header"].tobytes().decode("utf-8"))
+    header["config"]["weight_gain"] = 1.0
+    header["config"]["association"]["best_pair"] = False
+    arrays["header"] = np.frombuffer(json.dumps(header).encode("utf-8"), np.uint8)
+    np.savez(path, **arrays)
+    copy, _ = load_checkpoint(path)
+    assert copy.config == slam.config

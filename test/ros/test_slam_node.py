@@ -360,10 +360,10 @@ def test_inputs_whose_publishers_appear_after_the_discovery_wait_still_receive_t
             obs_pub.publish(observations_to_cloud(
                 ObservationSet("robot7", stamp, z, np.tile(np.eye(3) * 1e-3, (3, 1, 1))), "robot7/base_link"))
         end = time.time() + 10
-        while time.time() < end and not (poses and slam.mapper._odom["robot6"]):
+        while time.time() < end and not (poses and slam.mapper.ordering.latest_odometry("robot6")):
             ex.spin_once(timeout_sec=0.05)
         assert poses, dict(slam.diag.drops)
-        assert len(slam.mapper._odom["robot6"]) >= 1
+        assert slam.mapper.ordering.latest_odometry("robot6") is not None
         assert msg_to_pose(poses[0].pose.pose)[2] == pytest.approx(0.94, abs=0.05), dict(slam.diag.drops)
     finally:
         rclpy.shutdown()

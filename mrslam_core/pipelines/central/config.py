@@ -1,0 +1,165 @@
+"""The central mapper's configuration: :class:`CentralConfig` and its :class:`MapCheckConfig`.
+
+The SLAM node's parameters and the run configs' YAML keys are these field names (the node's and
+the dataset run's configs extend :class:`CentralConfig`)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Literal
+
+from mrslam_core.fusion.config import FusionConfig
+from mrslam_core.slam.config import FilterConfig
+
+
+#: translation [m] and rotation [rad] an odometry pose may jump beyond odom_reset_speed and
+#: odom_reset_turn_rate times the time since the previous pose (stamp jitter, message bursts)
+ODOM_RESET_FLOOR = (0.1, 0.2)
+
+
+@dataclass(frozen=True)
+class MapCheckConfig:
+    """Checking each robot against the older map while it drives (a robot that lost its heading).
+
+    Every ``every`` seconds of a robot's sets, its sets of the last ``window`` seconds, moved into
+    its current base_link (one point per frontend track), are aligned to the best
+    particle's landmarks that are older than ``age`` (descriptor matches, RANSAC and least
+    squares, the ``fusion`` thresholds but ``min_inliers``). Landmarks the robot mapped since it
+    went wrong are younger and left out, so the fit shows where the older map puts the robot. If
+    the fit is more than ``shift`` or ``turn`` away from the robot's estimate (and within
+    ``max_shift`` and ``max_turn``: no jump across the building), the robot's pose is drawn again in
+    every particle from the fit. A robot whose wheels slipped while it saw nothing comes back
+    several degrees off, and then maps a corridor mapped before as a new one, turned: no
+    association gate reaches landmarks 0.3 m away, while descriptors do.
+
+    Attributes:
+        every: seconds of a robot's sets between checks; 0: off [s].
+        window: seconds of the robot's recent sets aligned together [s]. 3 s, not 2: after a
+            blind turn a robot meets few old landmarks a set, and a longer window gathers the
+            inliers a fit needs (closed loop, seeds 14-39: robots above 0.10 m 2 -> 1 of 78,
+            docs/results.md).
+        age: only landmarks created at least this long before the check take part [s].
+        min_inliers: fewest RANSAC inliers of a fit that may move the robot.
+        min_gain: a fit that disagrees must explain at least this many more of the window's
+            descriptor matches (counted as ``gain_gate`` says) than the robot's estimate does;
+            otherwise the two are look-alikes of each other and the check is ``ambiguous``.
+            Recorded demos d1–d3 (counted within 0.3 m): moves that fixed a heading gained 9–35
+            inliers; a move onto a fit 16° off gained 1, one onto a fit 0.8 m off gained 7.
+        shift: a fit closer than this to the estimate, and within ``turn``, agrees with it [m].
+        turn: see ``shift`` [rad]. 2.5°: under ``gain_gate`` an estimate 2.5–5° off explains
+            far fewer matches than its fit and is corrected (counted within 0.3 m it explained
+            about as many, and 2.5° moved no robot more than 5° did; docs/results.md).
+        max_shift: a fit further than this from the estimate is not used [m].
+        max_turn: a fit turned more than this from the estimate is not used [rad].
+        sigma_xy: standard deviation added to the fit's own, per axis, when the poses are drawn [m].
+        sigma_theta: the same for the heading [rad].
+        gain_gate: how ``min_gain`` counts the matches a pose explains: 0, within the fusion's
+            ``inlier_distance`` (the fit's RANSAC inliers against the estimate's); > 0, within
+            this chi-square (2 dof) gate of the planar Mahalanobis distance under both points'
+            covariances plus ``sigma_xy`` (the fit's and the estimate's counted alike). 9.21
+            (chi-square 0.99): a robot 5° off explains no stereo point 2 m away, which a 0.3 m
+            distance still counts (recorded demo d1, robot3 5.3° off: within 0.3 m its estimate
+            explained 10 matches against the fit's 18, under the gate 1 against 21).
+        distrust_moved: when a check moves a robot, the landmarks it made since its last
+            agreeing check (all of them, if it never had one) were mapped from the wrong pose;
+            later checks leave them out of the older map, so no robot is moved onto them.
+        poses: what moves the window's sets into the current base_link: ``estimate``, the
+            robot's filtered poses (their 2 s heading change errs 0.1–0.2° at the median, 1–5° at
+            p95 in recorded runs; a robot that lost its heading still tracks its own new
+            landmarks), or ``odometry`` (1–2.4° median, 5–8° p95 over 2 s in the same runs).
+    """
+
+    every: float = 1.0
+    window: float = 3.0
+    age: float = 10.0
+    min_inliers: int = 10
+    min_gain: int = 8
+    shift: float = 0.3
+    turn: float = 0.044
+    max_shift: float = 1.0
+    max_turn: float = 0.5
+    sigma_xy: float = 0.03
+    sigma_theta: float = 0.015
+    poses: Literal["estimate", "odometry"] = "estimate"
+    gain_gate: float = 9.21
+    distrust_moved: bool = True
+
+
+@dataclass(frozen=True)
+class CentralConfig:
+    """The central mapper.
+
+    Attributes:
+        robots: robot names (topic namespaces and frame prefixes), the K axis of the filter.
+        start_poses: known start poses, x y θ per robot in ``robots`` order (map frame) [m, rad].
+        odom_buffer: odometry poses kept per robot for interpolation.
+        max_wait: longest a set waits for the other robots' sets of the same time [s].
+        max_queue: observation sets held at most; beyond it the oldest is dropped and counted.
+        unknown_start: robots whose start pose is unknown (their ``start_poses`` entries are not
+            used); if every robot is listed, the first one's start pose defines the map frame.
+        merge_every: updates of a robot with an unknown start between attempts to align its map.
+        sample_gap: when a robot's previous update is older than this, its motion up to 0.2 s
+            before the set is applied first without observations (each particle draws its own
+            motion noise), then the rest with the set: the particles then associate the set
+            from distinct poses, where a FastSLAM 2.0 proposal from the one predicted pose of a
+            long motion follows whatever the set matches there (a restart of the central node,
+            a frame dropped by a slow frontend); 0: never [s].
+        relocalize_after: a robot whose previous update is older than this (it went silent:
+            a link down, a frontend restarted) is placed by its observations instead of by its
+            odometry over the gap: its observation set is aligned to the best particle's map
+            (descriptor matches, RANSAC and least squares, ``fusion`` thresholds) and its
+            particles drawn from the fit (stereo points only); 0: never [s].
+        relocalize_when_blind: the gap of ``relocalize_after`` also runs while the robot's sets
+            hold fewer than ``fusion.min_inliers`` points (blind: facing a wall, turning): it moved
+            by odometry alone as much as a silent robot does.
+        relocalize_tries: attempts, one a second, before a robot back from a gap is left to
+            its odometry (a frame whose matches are bunched up cannot fix the rotation); its
+            sets in between move it by odometry only and are counted, not mapped.
+        relocalize_gate: the fit is used only within this distance of the dead-reckoned pose,
+            plus ``relocalize_drift`` times the distance driven during the gap [m].
+        relocalize_drift: see ``relocalize_gate`` [m/m].
+        max_odom_gap: a set whose stamp falls between two odometry poses further apart than this
+            is dropped (counted as ``odometry_gap``) instead of placed by interpolating across
+            the hole (odometry lost while the central node was down, a driver that stalled); a
+            robot turning at 0.5 rad/s at 0.35 m/s leaves a chord up to 2 cm off its arc over
+            1 s, 9 cm over 2 s [s].
+        odom_reset_speed: an odometry pose further from the robot's previous one than
+            ``ODOM_RESET_FLOOR`` plus this speed times the time between them is an odometry
+            reset (the robot's driver restarted, its odom frame is new; a robot carried while
+            off): the robot is mapped on its own again from its new odometry origin and merged
+            back by map alignment, as a robot with an unknown start (004 section 5); set it
+            above the fastest robot of the team; 0: never [m/s].
+        odom_reset_turn_rate: the same for the heading [rad/s].
+        teammate_radius: stereo points within this horizontal distance of another robot's
+            estimated position (base_link), and lower than ``teammate_height``, are that robot's
+            body, not landmarks: they are left out of the set and counted (``on_teammate``, in
+            points). Robots see each other; mapped as landmarks, a teammate's corners would move
+            away with it and pull whoever associates them. Covers the body and the pose's
+            uncertainty (a P3-DX's rear corner is 0.33 m from the axle); 0: off [m].
+        teammate_height: top of the robots' bodies and sensor heads above the floor [m].
+        map_check: checking each robot against the older map while it drives.
+        filter: the multi-robot filter (and each unknown-start robot's local filter).
+        fusion: map alignment and joining of unknown-start robots.
+    """
+
+    robots: tuple[str, ...] = ("robot1",)
+    start_poses: tuple[float, ...] = (0.0, 0.0, 0.0)
+    odom_buffer: int = 2000
+    max_wait: float = 1.0
+    max_queue: int = 200
+    unknown_start: tuple[str, ...] = ()
+    merge_every: int = 10
+    sample_gap: float = 1.0
+    relocalize_after: float = 5.0
+    relocalize_when_blind: bool = False
+    relocalize_tries: int = 3
+    relocalize_gate: float = 0.5
+    relocalize_drift: float = 0.1
+    max_odom_gap: float = 1.0
+    odom_reset_speed: float = 2.0
+    odom_reset_turn_rate: float = 6.0
+    teammate_radius: float = 0.0
+    teammate_height: float = 0.6
+    map_check: MapCheckConfig = field(default_factory=MapCheckConfig)
+    filter: FilterConfig = field(default_factory=FilterConfig)
+    fusion: FusionConfig = field(default_factory=FusionConfig)

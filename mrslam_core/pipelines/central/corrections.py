@@ -1,0 +1,351 @@
+"""Corrections: moving a robot of the central filter where its odometry alone would not put it.
+
+A robot back from a gap (silent, or blind with ``relocalize_when_blind``, for longer than
+``relocalize_after``) is placed by aligning its observation set to the map; the motion over a
+long gap (``sample_gap``) is sampled before the set is associated; every ``map_check.every``
+seconds a robot's recent sets are aligned to the older map, and a robot the map disagrees with
+twice is moved. Each move redraws the robot's pose in every particle from the fit. The mapper
+calls these at fixed points of an update (:meth:`Corrections.before_step`,
+:meth:`Corrections.hold`, :meth:`Corrections.after_step`, :meth:`Corrections.forget`), so the
+rules can be replaced as one.
+"""
+
+from __future__ import annotations
+
+from collections import Counter, deque
+from collections.abc import Callable
+from dataclasses import replace
+from typing import Any
+
+import numpy as np
+
+from mrslam_core.geometry.se2 import between, compose, wrap_angle
+from mrslam_core.pipelines.central.config import CentralConfig
+from mrslam_core.pipelines.central.ordering import Pairing
+from mrslam_core.pipelines.central.state import set_from_state, sets_state
+from mrslam_core.slam.filter import FilterInputError, MultiRobotFastSLAM, RobotUpdate
+from mrslam_core.types import ObservationSet
+
+
+class Corrections:
+    """The gap re-localisation, the gap sampling and the map check, and what they remember.
+
+    Args:
+        cfg: ``relocalize_*``, ``sample_gap``, ``map_check``, ``fusion`` and the filter's
+            ``observation_model`` apply.
+        robots: robot names.
+        drops: the mapper's drop counter (by reason), counted into.
+
+    Attributes:
+        relocalizations: every re-localisation after a gap (cause "gap": robot, stamp_ns, gap_s,
+            travelled_m, accepted, reason, inliers, shift_m) and every move by a map check
+            (cause "map_check": also turn_rad, estimate_inliers, fit_support, transform).
+        map_checks: map checks made, by outcome (see :class:`MapCheckConfig`).
+        distrusted: (robot index, from_ns, to_ns): landmarks that robot made in that time, left
+            out of map checks (``map_check.distrust_moved``).
+    """
+
+    def __init__(self, cfg: CentralConfig, robots: list[str], drops: Counter[str]):
+        self.cfg = cfg
+        self.robots = robots
+        self.drops = drops
+        self.relocalizations: list[dict] = []
+        self.map_checks: Counter[str] = Counter()
+        self.distrusted: list[tuple[int, int, int]] = []
+        #: stamp of each robot's last set that could re-localise it (relocalize_when_blind) [ns]
+        self._sighted: dict[str, int] = {}
+        #: robots back from a gap, not re-localised yet: (attempts left, stamp the gap began [ns])
+        self._returning: dict[str, tuple[int, int]] = {}
+        #: stamp of each robot's last re-localisation attempt [ns]
+        self._reloc_tried: dict[str, int] = {}
+        #: each robot's recent sets for the map check: (stamp_ns, pose (3,) per map_check.poses, set)
+        self._recent: dict[str, deque[tuple[int, np.ndarray, ObservationSet]]] = {r: deque() for r in robots}
+        #: stamp of each robot's last map check [ns]
+        self._checked: dict[str, int] = {}
+        #: each robot's last disagreeing fit, waiting for the next check: (stamp_ns, pose, fit (3,))
+        self._pending: dict[str, tuple[int, np.ndarray, np.ndarray]] = {}
+        #: each robot's last agreeing map check [ns]
+        self._agreed: dict[str, int] = {}
+
+    # ------------------------------------------------------------------ the mapper's calls
+    def before_step(self, slam: MultiRobotFastSLAM, filt: MultiRobotFastSLAM, obs: ObservationSet,
+                    pairing: Pairing, path_length: Callable[[str, int, int], float]) -> np.ndarray:
+        """Before ``filt`` (the central filter ``slam`` or the robot's local one) takes ``obs``:
+        re-localise a robot back from a gap, sample the motion over a long one. Returns the
+        motion (3,) [m, rad, robot frame] still to apply with the set.
+
+        Args:
+            pairing: the set's odometry.
+            path_length: distance (robot, from_ns, to_ns) -> [m] the robot's odometry covered.
+        """
+        motion = between(pairing.reference, pairing.odom)
+        motion = self._relocalize_if_back(slam, filt, obs, pairing.previous_ns, motion, path_length)
+        return self._sample_gap(filt, obs, pairing, motion)
+
+    def hold(self, obs: ObservationSet, first: bool) -> bool:
+        """True if ``obs``'s robot awaits its re-localisation: its pose is in doubt, so the set
+        moves it by odometry only and must not shape the map (counted); otherwise a set the robot
+        could be placed by (or its ``first``) closes a blind spell."""
+        if obs.robot in self._returning:
+            self.drops["awaiting_relocalization"] += 1
+            return True
+        if first or len(obs) >= self.cfg.fusion.min_inliers:
+            self._sighted[obs.robot] = obs.stamp_ns
+        return False
+
+    def after_step(self, slam: MultiRobotFastSLAM, obs: ObservationSet, odom: np.ndarray) -> None:
+        """After the central filter ``slam`` mapped ``obs`` (taken at odometry pose ``odom`` (3,)):
+        the map check."""
+        self._check_map(slam, obs, odom)
+
+    def forget(self, robot: str) -> None:
+        """Drop what is remembered of ``robot`` (its odometry restarted: it is mapped anew)."""
+        for state in (self._returning, self._reloc_tried, self._sighted, self._checked, self._pending, self._agreed):
+            state.pop(robot, None)
+        self._recent[robot].clear()
+
+    # ------------------------------------------------------------------ gaps
+    def _relocalize_if_back(self, slam: MultiRobotFastSLAM, filt: MultiRobotFastSLAM, obs: ObservationSet,
+                            previous_ns: int | None, motion: np.ndarray,
+                            path_length: Callable[[str, int, int], float]) -> np.ndarray:
+        """Try to place a central robot whose previous update (or last sighting) is older than
+        ``relocalize_after``, at most once a second and ``relocalize_tries`` times; the motion
+        (3,) left to apply: none once placed."""
+        cfg = self.cfg
+        if obs.robot in self._returning:
+            seen = self._returning[obs.robot][1]
+        elif previous_ns is None:
+            seen = obs.stamp_ns
+        else:
+            seen = self._sighted.get(obs.robot, previous_ns) if cfg.relocalize_when_blind else previous_ns
+        gap = (obs.stamp_ns - seen) * 1e-9
+        tried = self._reloc_tried.get(obs.robot, seen)
+        relocalizing = (filt is slam and 0 < cfg.relocalize_after < gap
+                        and cfg.filter.observation_model == "stereo_point")
+        if relocalizing and len(obs) < cfg.fusion.min_inliers and obs.robot not in self._returning:
+            # back from silence with too few points to place it (a frontend's tracks start again
+            # after a gap): the gap stays open until a set can be aligned, and its sets wait
+            self._returning[obs.robot] = (cfg.relocalize_tries, seen)
+        if relocalizing and obs.stamp_ns - tried >= 1e9 and len(obs) >= cfg.fusion.min_inliers:
+            self._reloc_tried[obs.robot] = obs.stamp_ns
+            left = self._returning.get(obs.robot, (cfg.relocalize_tries, seen))[0] - 1
+            if self._relocalize(slam, obs, motion, gap, path_length(obs.robot, seen, obs.stamp_ns)):
+                motion = np.zeros(3)  # the particles are at this stamp already
+                left = 0
+            if left > 0:
+                self._returning[obs.robot] = (left, seen)  # the gap stays open: try again a second later
+            else:
+                self._returning.pop(obs.robot, None)
+        return motion
+
+    def _sample_gap(self, filt: MultiRobotFastSLAM, obs: ObservationSet, pairing: Pairing,
+                    motion: np.ndarray) -> np.ndarray:
+        """Over a gap longer than ``sample_gap``, apply the motion up to 0.2 s before the set
+        without observations first; the motion (3,) left to apply with the set."""
+        prev = pairing.previous_ns
+        if prev is not None and 0 < self.cfg.sample_gap < (obs.stamp_ns - prev) * 1e-9 and motion.any():
+            mid_ns = obs.stamp_ns - 200_000_000
+            mid = pairing.at(mid_ns)
+            if mid is None:
+                mid = pairing.reference
+            try:
+                filt.step([RobotUpdate(obs.robot, mid_ns, between(pairing.reference, mid), None)])
+                motion = between(mid, pairing.odom)
+            except FilterInputError:
+                pass
+        return motion
+
+    def _relocalize(self, slam: MultiRobotFastSLAM, obs: ObservationSet, motion: np.ndarray, gap: float,
+                    travelled: float) -> bool:
+        """Place ``obs.robot``, back after ``gap`` s and ``travelled`` m, by aligning its
+        observation set (base_link) to the best particle's map; True if its particles were
+        redrawn (logged in :attr:`relocalizations` either way)."""
+        from mrslam_core.fusion.alignment import ransac_align
+        from mrslam_core.fusion.maps import FusionError, LandmarkMap
+
+        k = slam.index[obs.robot]
+        dead = compose(slam.estimate().mean[k], motion)
+        entry = {"robot": obs.robot, "stamp_ns": int(obs.stamp_ns), "cause": "gap", "gap_s": gap,
+                 "travelled_m": travelled, "accepted": False}
+        self.relocalizations.append(entry)
+        limit = self.cfg.relocalize_gate + self.cfg.relocalize_drift * travelled
+        try:
+            frame = LandmarkMap(obs.z, obs.cov, obs.descriptors)
+            world = self.map_near(slam, dead, obs.z, limit)
+            al = ransac_align(world, frame, self.cfg.fusion)
+        except FusionError as exc:
+            entry["reason"] = str(exc)
+            return False
+        entry.update(reason=al.reason, inliers=int(len(al.inliers)))
+        if not al.accepted:
+            return False
+        shift = float(np.hypot(*(al.transform[:2] - dead[:2])))
+        entry["shift_m"] = shift
+        if shift > limit:
+            entry["reason"] = f"the fit is {shift:.2f} m from the dead-reckoned pose (gate {limit:.2f} m)"
+            return False
+        self._redraw(slam, obs.robot, al.transform, al.cov, (0.02, 0.01))  # a floor for a fit of few points
+        entry["accepted"] = True
+        return True
+
+    # ------------------------------------------------------------------ the map check
+    def _check_map(self, slam: MultiRobotFastSLAM, obs: ObservationSet, odom: np.ndarray) -> None:
+        """Keep ``obs`` (taken at odometry pose ``odom``) among its robot's recent sets and, when
+        due, align those sets to the older map and move the robot if the map disagrees
+        (:class:`MapCheckConfig`)."""
+        mc = self.cfg.map_check
+        if mc.every <= 0 or self.cfg.filter.observation_model != "stereo_point":
+            return
+        k = slam.index[obs.robot]
+        est = slam.estimate().mean[k]
+        at = est if mc.poses == "estimate" else odom
+        recent = self._recent[obs.robot]
+        if len(obs):
+            recent.append((int(obs.stamp_ns), at, obs))
+        while recent and recent[0][0] < obs.stamp_ns - mc.window * 1e9:
+            recent.popleft()
+        if obs.stamp_ns - self._checked.get(obs.robot, -(1 << 62)) < mc.every * 1e9:
+            return
+        self._checked[obs.robot] = int(obs.stamp_ns)
+        from mrslam_core.fusion.alignment import explained, ransac_align
+        from mrslam_core.fusion.maps import FusionError
+
+        frame = self._recent_frame(obs.robot, at)
+        if frame is None or len(frame.means) < mc.min_inliers:
+            self.map_checks["too_few_points"] += 1
+            return
+        world = self.map_near(slam, est, frame.means, mc.max_shift, obs.stamp_ns - mc.age * 1e9)
+        try:
+            al = ransac_align(world, frame, replace(self.cfg.fusion, min_inliers=mc.min_inliers))
+        except FusionError:
+            al = None
+        if al is None or not al.accepted:
+            self.map_checks["no_fit"] += 1
+            self._pending.pop(obs.robot, None)
+            return
+        shift = float(np.hypot(*(al.transform[:2] - est[:2])))
+        turn = float(wrap_angle(al.transform[2] - est[2]))
+        if shift <= mc.shift and abs(turn) <= mc.turn:
+            self.map_checks["agreed"] += 1
+            self._agreed[obs.robot] = int(obs.stamp_ns)
+            self._pending.pop(obs.robot, None)
+            return
+        if shift > mc.max_shift or abs(turn) > mc.max_turn:
+            self.map_checks["too_far"] += 1
+            return
+        dist = self.cfg.fusion.inlier_distance
+        support = int(explained(est, world, frame, al.matches, dist, mc.gain_gate, mc.sigma_xy).sum())
+        fit_support = (int(explained(al.transform, world, frame, al.matches, dist, mc.gain_gate, mc.sigma_xy).sum())
+                       if mc.gain_gate > 0 else len(al.inliers))
+        if fit_support - support < mc.min_gain:
+            self.map_checks["ambiguous"] += 1
+            self._pending.pop(obs.robot, None)
+            return
+        # a fit of look-alikes disagrees once; the robot is moved when the next check's fit, from
+        # other sets, lands where the previous one said the robot would be by now
+        before = self._pending.get(obs.robot)
+        self._pending[obs.robot] = (int(obs.stamp_ns), at, al.transform)
+        if before is None or obs.stamp_ns - before[0] > 1.5 * mc.every * 1e9:
+            self.map_checks["unconfirmed"] += 1
+            return
+        then = compose(before[2], between(before[1], at))
+        if (np.hypot(*(then[:2] - al.transform[:2])) > mc.shift
+                or abs(float(wrap_angle(then[2] - al.transform[2]))) > mc.turn):
+            self.map_checks["unconfirmed"] += 1
+            return
+        del self._pending[obs.robot]
+        self.map_checks["moved"] += 1
+        if mc.distrust_moved:
+            self.distrusted.append((k, self._agreed.get(obs.robot, -1), int(obs.stamp_ns)))
+        self.relocalizations.append({"robot": obs.robot, "stamp_ns": int(obs.stamp_ns), "cause": "map_check",
+                                     "accepted": True, "reason": "", "inliers": int(len(al.inliers)),
+                                     "estimate_inliers": support, "fit_support": fit_support,
+                                     "shift_m": shift, "turn_rad": turn,
+                                     "transform": [float(v) for v in al.transform]})
+        self._redraw(slam, obs.robot, al.transform, al.cov, (mc.sigma_xy, mc.sigma_theta), int(obs.stamp_ns))
+
+    def map_near(self, slam: MultiRobotFastSLAM, pose: np.ndarray, points: np.ndarray, margin: float,
+                 born_before: float | None = None):
+        """The best particle's landmarks (a :class:`LandmarkMap`, map frame) that ``points`` (N, ≥2),
+        seen from base_link, can be matched to from anywhere within ``margin`` [m] of ``pose`` (3,):
+        fewer look-alikes; with ``born_before``, only those created before that stamp [ns]."""
+        from mrslam_core.fusion.maps import LandmarkMap
+
+        world = LandmarkMap.from_filter(slam)
+        reach = margin + float(np.linalg.norm(points[:, :2], axis=1).max()) + self.cfg.fusion.inlier_distance
+        keep = np.linalg.norm(world.means[:, :2] - pose[:2], axis=1) <= reach
+        if born_before is not None:
+            keep &= slam.landmarks.born[world.ids] < born_before
+        if self.distrusted:
+            maker, born = slam.landmarks.maker[world.ids], slam.landmarks.born[world.ids]
+            for k, t0, t1 in self.distrusted:
+                keep &= ~((maker == k) & (born >= t0) & (born <= t1))
+        return world.subset(np.flatnonzero(keep))
+
+    def _redraw(self, slam: MultiRobotFastSLAM, robot: str, fit: np.ndarray, cov: np.ndarray,
+                floor: tuple[float, float], stamp_ns: int | None = None) -> None:
+        """Draw ``robot``'s pose in every particle from N(fit (3,), cov (3, 3) + diag(floor)²),
+        floor = (σ_xy [m], σ_θ [rad]); ``stamp_ns``: the time of those poses (None: no history)."""
+        cov = np.nan_to_num(cov) + np.diag([floor[0] ** 2, floor[0] ** 2, floor[1] ** 2])
+        chol = np.linalg.cholesky(0.5 * (cov + cov.T))
+        draws = fit + (chol @ slam.rng.standard_normal((slam.num_particles, 3, 1)))[..., 0]
+        draws[:, 2] = wrap_angle(draws[:, 2])
+        slam.add_robot(robot, draws, stamp_ns=stamp_ns)
+        if self.cfg.map_check.poses == "estimate":  # the recent sets were placed by the poses just replaced
+            self._recent[robot].clear()
+            self._pending.pop(robot, None)
+
+    def _recent_frame(self, robot: str, pose: np.ndarray):
+        """The robot's recent sets as one :class:`LandmarkMap` in its base_link at ``pose`` (3,)
+        (estimate or odometry, as the sets were kept: ``map_check.poses``), newest observation of
+        each frontend track only; None without points."""
+        from mrslam_core.fusion.maps import FusionError, LandmarkMap
+
+        parts, seen = [], set()
+        for _, at, o in reversed(self._recent[robot]):
+            fresh = np.array([t < 0 or t not in seen for t in o.track_ids.tolist()], bool)
+            seen.update(o.track_ids[fresh & (o.track_ids >= 0)].tolist())
+            if fresh.any():
+                try:
+                    parts.append(LandmarkMap(o.z[fresh], o.cov[fresh], o.descriptors[fresh]).transformed(between(pose, at)))
+                except FusionError:
+                    continue
+        if not parts:
+            return None
+        return LandmarkMap(np.concatenate([p.means for p in parts]), np.concatenate([p.covs for p in parts]),
+                           np.concatenate([p.descriptors for p in parts]))
+
+    # ------------------------------------------------------------------ checkpoint
+    def state(self) -> dict[str, Any]:
+        """Everything above as JSON values and arrays: ``relocalizations``, ``map_checks``,
+        ``distrusted``, ``sighted``, ``returning`` (robot: [attempts left, gap start ns]),
+        ``reloc_tried``, ``checked``, ``agreed``, ``pending`` (robot: [stamp_ns, pose (3), fit (3)]),
+        ``recent`` ([robot, stamp_ns, pose (3)] in each robot's order) with the sets' arrays
+        (``recent_*_{i}``)."""
+        recent = [(r, s, at, o) for r in self.robots for s, at, o in self._recent[r]]
+        return {
+            "relocalizations": [dict(e) for e in self.relocalizations], "map_checks": dict(self.map_checks),
+            "distrusted": [list(d) for d in self.distrusted], "sighted": dict(self._sighted),
+            "returning": {r: list(v) for r, v in self._returning.items()}, "reloc_tried": dict(self._reloc_tried),
+            "checked": dict(self._checked), "agreed": dict(self._agreed),
+            "pending": {r: [s, *map(float, at), *map(float, fit)] for r, (s, at, fit) in self._pending.items()},
+            "recent": [[r, s, *map(float, at)] for r, s, at, _ in recent],
+            **sets_state("recent", [o for *_, o in recent]),
+        }
+
+    def load_state(self, state: dict[str, Any]) -> None:
+        """Take the state :meth:`state` gave (into a new part, of the same robots); keys a version
+        2 checkpoint lacks keep their initial values."""
+        self.relocalizations = [dict(e) for e in state.get("relocalizations", [])]
+        self.map_checks = Counter(state.get("map_checks", {}))
+        self.distrusted = [tuple(int(x) for x in d) for d in state.get("distrusted", [])]
+        self._sighted = {r: int(v) for r, v in state.get("sighted", {}).items()}
+        self._returning = {r: (int(v[0]), int(v[1])) for r, v in state.get("returning", {}).items()}
+        self._reloc_tried = {r: int(v) for r, v in state.get("reloc_tried", {}).items()}
+        self._checked = {r: int(v) for r, v in state.get("checked", {}).items()}
+        self._agreed = {r: int(v) for r, v in state.get("agreed", {}).items()}
+        self._pending = {r: (int(v[0]), np.array(v[1:4], float), np.array(v[4:7], float))
+                         for r, v in state.get("pending", {}).items()}
+        for i, (robot, stamp, *at) in enumerate(state.get("recent", [])):
+            obs = set_from_state(state, "recent", i, robot, stamp)
+            self._recent[robot].append((int(stamp), np.array(at, float), obs))

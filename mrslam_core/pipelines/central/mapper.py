@@ -1,0 +1,318 @@
+"""The central mapper: the parts composed into one update per observation set, and checkpoints.
+
+An update takes a set the :class:`~.ordering.Ordering` released with its odometry, gives it to
+the filter that maps its robot (:class:`~.lifecycle.Lifecycle`: the central one, or the robot's
+local one before its merge), with the :class:`~.corrections.Corrections` before and after the
+filter step, and records the robot's pose. A checkpoint is the central filter plus each part's
+state.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import Counter
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from mrslam_core.geometry.se2 import between, compose, transform_points
+from mrslam_core.pipelines.central.config import CentralConfig
+from mrslam_core.pipelines.central.corrections import Corrections
+from mrslam_core.pipelines.central.lifecycle import Lifecycle
+from mrslam_core.pipelines.central.ordering import Ordering
+from mrslam_core.slam.filter import FilterInputError, MultiRobotFastSLAM, RobotUpdate
+from mrslam_core.types import ObservationSet
+
+#: the parts of a checkpoint's mapper state, each under its name (``mapper``: the mapper's own)
+PARTS = ("mapper", "ordering", "lifecycle", "corrections")
+
+
+@dataclass(frozen=True)
+class Processed:
+    """One filter update the mapper made.
+
+    Attributes:
+        robot: whose update.
+        stamp_ns: its stamp [ns].
+        pose: (3,) the robot's weighted-mean pose after the update, map frame.
+        cov: (3, 3) its covariance.
+        odom: (3,) the robot's odometry pose at the stamp, odom frame.
+        step_ms: wall time of the filter step [ms].
+        merged: the pose is in the map frame (False: an unknown-start robot not merged yet,
+            whose pose is in its own start frame, or a robot back from silence awaiting its
+            re-localisation, at its dead-reckoned pose).
+    """
+
+    robot: str
+    stamp_ns: int
+    pose: np.ndarray
+    cov: np.ndarray
+    odom: np.ndarray
+    step_ms: float
+    merged: bool = True
+
+
+class CentralMapper:
+    """Queue, order and pair the team's messages; run the filter; keep the trajectories.
+
+    Args:
+        cfg: robots, start poses, buffer sizes and the filter.
+
+    Attributes:
+        slam: the central filter (map frame).
+        ordering, lifecycle, corrections: the parts.
+        drops: everything that could not be used, by reason (every part counts here).
+        update_ms: wall time of each update [ms].
+        trajectory: robot -> [(stamp_ns, pose (3,) map frame)] of its central-filter updates.
+        held: robot -> stamps of the updates made while it awaited its re-localisation (not
+            reported).
+    """
+
+    def __init__(self, cfg: CentralConfig):
+        self.cfg = cfg
+        self.robots = list(cfg.robots)
+        self.drops: Counter[str] = Counter()
+        self.lifecycle = Lifecycle(cfg, self.drops)
+        self.slam = self.lifecycle.central_filter()
+        self.ordering = Ordering(cfg, self.robots, self.drops)
+        self.corrections = Corrections(cfg, self.robots, self.drops)
+        self.update_ms: list[float] = []
+        self.trajectory: dict[str, list[tuple[int, np.ndarray]]] = {r: [] for r in self.robots}
+        self.held: dict[str, set[int]] = {r: set() for r in self.robots}
+
+    # ------------------------------------------------------------------ the parts' results
+    @property
+    def local(self) -> dict[str, MultiRobotFastSLAM]:
+        """Unknown-start (or restarted) robots not merged yet: their local filters."""
+        return self.lifecycle.local
+
+    @property
+    def merges(self) -> list[dict]:
+        """Every alignment attempt of a local map (:attr:`Lifecycle.merges`)."""
+        return self.lifecycle.merges
+
+    @property
+    def restarts(self) -> list[dict]:
+        """Every odometry reset (:attr:`Lifecycle.restarts`)."""
+        return self.lifecycle.restarts
+
+    @property
+    def relocalizations(self) -> list[dict]:
+        """Every re-localisation after a gap and move by a map check (:attr:`Corrections.relocalizations`)."""
+        return self.corrections.relocalizations
+
+    @property
+    def map_checks(self) -> Counter[str]:
+        """Map checks made, by outcome."""
+        return self.corrections.map_checks
+
+    @property
+    def now_ns(self) -> int:
+        """The newest observation stamp received [ns]."""
+        return self.ordering.now_ns
+
+    @property
+    def queued(self) -> int:
+        """Observation sets waiting."""
+        return self.ordering.queued
+
+    # ------------------------------------------------------------------ input
+    def add_odometry(self, robot: str, stamp_ns: int, pose: np.ndarray) -> bool:
+        """Buffer the odometry pose (3,) [m, rad] of ``robot`` at ``stamp_ns``; False if dropped.
+        A pose that jumped further than a robot drives restarts the robot (:class:`Lifecycle`)."""
+        pose = self.ordering.check_odometry(robot, stamp_ns, pose)
+        if pose is None:
+            return False
+        latest = self.ordering.latest_odometry(robot)
+        if latest is not None and self.lifecycle.restart_if_reset(robot, *latest, int(stamp_ns), pose):
+            self.ordering.forget(robot)
+            self.corrections.forget(robot)
+        self.ordering.append_odometry(robot, stamp_ns, pose)
+        return True
+
+    def add_observations(self, obs: ObservationSet) -> bool:
+        """Queue an observation set (base_link of ``obs.robot``); False if dropped."""
+        return self.ordering.add_observations(obs)
+
+    # ------------------------------------------------------------------ processing
+    def process(self, flush: bool = False, budget_s: float | None = None, max_sets: int | None = None) -> list[Processed]:
+        """Run the filter on every set that is due (all of them with ``flush``), in stamp order,
+        or only for about ``budget_s`` wall seconds or ``max_sets`` sets (the rest stays queued)."""
+        done: list[Processed] = []
+        until = None if budget_s is None else time.perf_counter() + budget_s
+
+        def more() -> bool:
+            return (until is None or time.perf_counter() < until) and (max_sets is None or len(done) < max_sets)
+
+        for obs in self.ordering.release(flush, more):
+            result = self._update(obs)
+            if result is not None:
+                done.append(result)
+        return done
+
+    def _update(self, obs: ObservationSet) -> Processed | None:
+        pairing = self.ordering.pair(obs)
+        if pairing is None:
+            return None
+        odom = pairing.odom
+        filt = self.lifecycle.local.get(obs.robot, self.slam)
+        t0 = time.perf_counter()
+        motion = self.corrections.before_step(self.slam, filt, obs, pairing, self.ordering.path_length)
+        obs = self._without_teammates(obs, odom)
+        held = self.corrections.hold(obs, first=pairing.previous_ns is None)
+        try:
+            filt.step([RobotUpdate(obs.robot, obs.stamp_ns, motion, None if held else obs)])
+        except FilterInputError:
+            self.drops["bad_observations"] += 1
+            return None
+        if filt is self.slam and not held:
+            self.corrections.after_step(self.slam, obs, odom)
+        ms = (time.perf_counter() - t0) * 1e3
+        self.update_ms.append(ms)
+        self.ordering.last[obs.robot] = (obs.stamp_ns, odom)
+        if filt is not self.slam:
+            self.lifecycle.updated(self.slam, obs.robot, obs.stamp_ns)
+            filt = self.lifecycle.local.get(obs.robot, self.slam)
+        est = filt.estimate()
+        k = filt.index[obs.robot]
+        if filt is self.slam:
+            self.trajectory[obs.robot].append((obs.stamp_ns, est.mean[k].copy()))
+            if held:
+                self.held[obs.robot].add(obs.stamp_ns)
+        # a robot back from silence and not placed again has no map pose yet, as an unknown-start
+        # robot before its merge: its dead-reckoned pose is neither published nor reported
+        merged = filt is self.slam and not held
+        return Processed(obs.robot, obs.stamp_ns, est.mean[k].copy(), est.cov[k].copy(), odom, ms, merged)
+
+    def _pose_at(self, robot: str, odom: np.ndarray) -> np.ndarray | None:
+        """Where ``robot`` is when its odometry reads ``odom`` (3,): its last estimate moved on by
+        its odometry since (map frame, or its own start frame while not merged); None before
+        its first update."""
+        last = self.ordering.last.get(robot)
+        if not self.trajectory[robot] or last is None:
+            return None
+        return compose(self.trajectory[robot][-1][1], between(last[1], odom))
+
+    def _without_teammates(self, obs: ObservationSet, odom: np.ndarray) -> ObservationSet:
+        """``obs`` without the points on another robot's body (``teammate_radius``)."""
+        cfg = self.cfg
+        if cfg.teammate_radius <= 0 or len(obs) == 0 or cfg.filter.observation_model != "stereo_point" \
+                or obs.robot in self.local:
+            return obs
+        me = self._pose_at(obs.robot, odom)
+        others = []
+        for other in self.robots:
+            if other == obs.robot or other in self.local:
+                continue
+            at = self.ordering.odometry_at(other, obs.stamp_ns)
+            pose = None if at is None else self._pose_at(other, at)
+            if pose is not None:
+                others.append(pose[:2])
+        if me is None or not others:
+            return obs
+        xy = transform_points(me, obs.z[:, :2])
+        d = np.linalg.norm(xy[:, None] - np.array(others)[None], axis=2).min(axis=1)
+        body = (d < cfg.teammate_radius) & (obs.z[:, 2] < cfg.teammate_height)
+        if not body.any():
+            return obs
+        self.drops["on_teammate"] += int(body.sum())
+        keep = ~body
+        return ObservationSet(obs.robot, obs.stamp_ns, obs.z[keep], obs.cov[keep], obs.descriptors[keep],
+                              obs.track_ids[keep])
+
+    # ------------------------------------------------------------------ results
+    def trajectories(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+        """robot -> (stamps (N,) [ns], poses (N, 3) map frame) of every update made in the map
+        (not those awaiting a re-localisation)."""
+        out = {}
+        for r, rows in self.trajectory.items():
+            rows = [row for row in rows if row[0] not in self.held[r]]
+            stamps = np.array([s for s, _ in rows], np.int64)
+            poses = np.array([p for _, p in rows]).reshape(-1, 3)
+            out[r] = (stamps, poses)
+        return out
+
+    def counters(self) -> dict[str, int]:
+        """Drops of the mapper and of the filter, by reason."""
+        out = Counter(self.drops)
+        out.update({f"filter_{k}": v for k, v in self.slam.dropped.items()})
+        for local in self.local.values():
+            out.update({f"filter_{k}": v for k, v in local.dropped.items()})
+        return dict(out)
+
+    # ------------------------------------------------------------------ checkpoints
+    def state(self) -> dict[str, dict[str, Any]]:
+        """Each part's state by name (:data:`PARTS`; JSON values and numeric arrays), ``mapper``
+        the mapper's own: ``drops``, ``update_ms`` (N,) [ms], and per robot index k
+        ``traj_t_{k}`` int64 (N,) [ns], ``traj_p_{k}`` (N, 3) map frame, ``held_t_{k}`` int64 [ns]."""
+        own: dict[str, Any] = {"drops": dict(self.drops), "update_ms": np.asarray(self.update_ms, float)}
+        for k, r in enumerate(self.robots):
+            own[f"traj_t_{k}"] = np.array([t for t, _ in self.trajectory[r]], np.int64)
+            own[f"traj_p_{k}"] = np.array([p for _, p in self.trajectory[r]], float).reshape(-1, 3)
+            own[f"held_t_{k}"] = np.array(sorted(self.held[r]), np.int64)
+        return {"mapper": own, "ordering": self.ordering.state(), "lifecycle": self.lifecycle.state(),
+                "corrections": self.corrections.state()}
+
+    def _load_state(self, states: dict[str, dict[str, Any]]) -> None:
+        """Take the states :meth:`state` gave (into a new mapper, beside its restored filter)."""
+        own = states["mapper"]
+        self.drops.update(own["drops"])
+        self.update_ms = [float(x) for x in own["update_ms"]]
+        for k, r in enumerate(self.robots):
+            self.trajectory[r] = list(zip(own[f"traj_t_{k}"].tolist(), own[f"traj_p_{k}"]))
+            self.held[r] = set(own[f"held_t_{k}"].tolist()) if f"held_t_{k}" in own else set()
+        self.ordering.load_state(states["ordering"])
+        self.lifecycle.load_state(states["lifecycle"])
+        self.corrections.load_state(states["corrections"])
+
+    def save(self, path: str | Path) -> Path:
+        """Write the central filter and every part's state atomically to ``path`` (see
+        :mod:`mrslam_core.slam.checkpoint`; the parts' values as ``extra`` entries
+        ``<part>.<key>``, with the robots as ``robots``)."""
+        from mrslam_core.slam.checkpoint import save_checkpoint
+
+        extra: dict[str, Any] = {"robots": self.robots}
+        for part, state in self.state().items():
+            extra.update({f"{part}.{key}": value for key, value in state.items()})
+        return save_checkpoint(self.slam, path, extra)
+
+    @classmethod
+    def resume(cls, cfg: CentralConfig, path: str | Path) -> CentralMapper:
+        """A mapper in the state :meth:`save` wrote (or a version 2 checkpoint held), continuing
+        under ``cfg`` (same robots).
+
+        Raises:
+            CheckpointError: unreadable, or saved for other robots.
+        """
+        from mrslam_core.slam.checkpoint import CheckpointError, load_checkpoint
+
+        slam, extra = load_checkpoint(path)
+        robots, states = _saved_states(extra, slam)
+        if robots is None or list(robots) != list(cfg.robots):
+            raise CheckpointError(f"{path}: saved for robots {robots}, not {list(cfg.robots)}")
+        mapper = cls(cfg)
+        mapper.slam = slam
+        try:
+            mapper._load_state(states)
+        except KeyError as exc:
+            raise CheckpointError(f"{path}: the mapper's state lacks {exc}") from exc
+        return mapper
+
+
+def _saved_states(extra: dict[str, Any],
+                  slam: MultiRobotFastSLAM) -> tuple[list[str] | None, dict[str, dict[str, Any]]]:
+    """(robots, each part's state) of a checkpoint's ``extra`` values beside its filter ``slam``:
+    by ``<part>.`` prefix; in a version 2 file, one flat state (JSON values under ``mapper``,
+    arrays beside it) in which every part finds its values under the names it uses today, the
+    queue without arrival numbers and, in the oldest, no list of unmerged robots (those not in
+    the filter)."""
+    legacy = extra.get("mapper")
+    if isinstance(legacy, dict):
+        flat = {**legacy, **{k: v for k, v in extra.items() if k != "mapper"}}
+        flat["queue"] = [[robot, stamp, i] for i, (robot, stamp) in enumerate(flat.get("queue", []))]
+        flat.setdefault("unmerged", [r for r in legacy.get("robots", []) if r not in slam.index])
+        return legacy.get("robots"), {part: flat for part in PARTS}
+    return extra.get("robots"), {part: {key[len(part) + 1:]: value for key, value in extra.items()
+                                        if key.startswith(f"{part}.")} for part in PARTS}

@@ -1,0 +1,245 @@
+"""Input ordering: the team's observation sets in stamp order, each paired with its odometry.
+
+Observation sets wait in a queue and are released in stamp order once every *active* robot
+(every robot of the config, unless silent for ``max_wait`` before the newest observation stamp,
+or never heard from within ``max_wait`` of the team's first set) has delivered a set at least as
+new, or once the set is ``max_wait`` older than the newest observation stamp (a late or silent
+robot delays the team by at most ``max_wait``; odometry does not advance this clock, so
+frontends that lag behind the odometry do not reorder anything). A released set is paired with
+the robot's odometry interpolated at its stamp; the motion since the robot's previous update is
+the filter's odometry input. Everything that cannot be used is counted in the mapper's drops.
+"""
+
+from __future__ import annotations
+
+import heapq
+from collections import Counter, deque
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from mrslam_core.evaluation.metrics import interpolate_poses
+from mrslam_core.pipelines.central.config import CentralConfig
+from mrslam_core.pipelines.central.state import set_from_state, sets_state
+from mrslam_core.types import ObservationSet
+
+
+@dataclass(frozen=True)
+class Pairing:
+    """A released set's odometry (odom frame of its robot).
+
+    Attributes:
+        odom: (3,) the odometry pose at the set's stamp [m, rad].
+        reference: (3,) the odometry pose the set's motion starts from: at the robot's previous
+            update, or where its odometry started (at its start pose) before its first.
+        previous_ns: stamp of the robot's previous update [ns]; None before its first.
+        since_ns: stamp of the oldest buffered odometry pose [ns].
+        stamps: (N,) the buffered odometry stamps [ns, as float].
+        poses: (N, 3) the buffered odometry poses [m, rad].
+    """
+
+    odom: np.ndarray
+    reference: np.ndarray
+    previous_ns: int | None
+    since_ns: int
+    stamps: np.ndarray
+    poses: np.ndarray
+
+    def at(self, stamp_ns: int) -> np.ndarray | None:
+        """The odometry pose (3,) interpolated at ``stamp_ns``; None at or before the oldest
+        buffered pose."""
+        if stamp_ns <= self.since_ns:
+            return None
+        return interpolate_poses(np.array([float(stamp_ns)]), self.stamps, self.poses)[0]
+
+
+class Ordering:
+    """The queue of observation sets, the odometry buffers and each robot's last update.
+
+    Args:
+        cfg: ``max_wait``, ``max_queue``, ``odom_buffer`` and ``max_odom_gap`` apply.
+        robots: robot names; their order breaks ties between sets of one stamp.
+        drops: the mapper's drop counter (by reason), counted into.
+
+    Attributes:
+        now_ns: the newest observation stamp received [ns].
+        last: robot -> (stamp [ns], odometry pose (3,)) of its last update.
+    """
+
+    def __init__(self, cfg: CentralConfig, robots: list[str], drops: Counter[str]):
+        self.cfg = cfg
+        self.robots = robots
+        self.drops = drops
+        self.now_ns = 0
+        self.last: dict[str, tuple[int, np.ndarray]] = {}
+        self._odom: dict[str, deque[tuple[int, np.ndarray]]] = {r: deque(maxlen=cfg.odom_buffer) for r in robots}
+        #: heap of (stamp_ns, robot index, arrival number, set): stamp order, ties by robot
+        self._queue: list[tuple[int, int, int, ObservationSet]] = []
+        self._queued: set[tuple[str, int]] = set()
+        self._seq = 0
+        self._latest_obs: dict[str, int] = {}
+        self._first_ns: int | None = None
+        self._wait_ns = int(cfg.max_wait * 1e9)
+
+    # ------------------------------------------------------------------ odometry
+    def check_odometry(self, robot: str, stamp_ns: int, pose: np.ndarray) -> np.ndarray | None:
+        """The odometry pose (3,) [m, rad] of ``robot`` at ``stamp_ns`` as floats if it can be
+        buffered (:meth:`append_odometry`); None, counted, if not."""
+        if robot not in self._odom:
+            self.drops["unknown_robot"] += 1
+            return None
+        pose = np.asarray(pose, float)
+        if pose.shape != (3,) or not np.isfinite(pose).all():
+            self.drops["bad_odometry"] += 1
+            return None
+        buf = self._odom[robot]
+        if buf and stamp_ns <= buf[-1][0]:
+            self.drops["odometry_out_of_order" if stamp_ns < buf[-1][0] else "odometry_duplicate_stamp"] += 1
+            return None
+        return pose
+
+    def latest_odometry(self, robot: str) -> tuple[int, np.ndarray] | None:
+        """(stamp [ns], pose (3,)) of the robot's newest buffered odometry; None if none."""
+        buf = self._odom[robot]
+        return buf[-1] if buf else None
+
+    def append_odometry(self, robot: str, stamp_ns: int, pose: np.ndarray) -> None:
+        """Buffer a pose that :meth:`check_odometry` accepted."""
+        self._odom[robot].append((int(stamp_ns), pose))
+
+    def odometry_at(self, robot: str, stamp_ns: int) -> np.ndarray | None:
+        """The robot's odometry pose (3,) at ``stamp_ns``: interpolated, or its newest for a later
+        stamp; None without odometry."""
+        buf = self._odom[robot]
+        if not buf:
+            return None
+        if stamp_ns >= buf[-1][0]:
+            return buf[-1][1]
+        t = np.fromiter((s for s, _ in buf), float, len(buf))
+        return interpolate_poses(np.array([float(stamp_ns)]), t, np.array([p for _, p in buf]))[0]
+
+    def path_length(self, robot: str, t0: int, t1: int) -> float:
+        """Distance the odometry of ``robot`` covered between stamps ``t0`` and ``t1`` [m]."""
+        xy = np.array([p[:2] for s, p in self._odom[robot] if t0 <= s <= t1]).reshape(-1, 2)
+        return float(np.linalg.norm(np.diff(xy, axis=0), axis=1).sum())
+
+    def forget(self, robot: str) -> None:
+        """Drop the robot's odometry and last update (its odometry restarted from a new origin)."""
+        self._odom[robot].clear()
+        self.last.pop(robot, None)
+
+    # ------------------------------------------------------------------ observation sets
+    def add_observations(self, obs: ObservationSet) -> bool:
+        """Queue an observation set (base_link of ``obs.robot``); False, counted, if dropped."""
+        if obs.robot not in self._odom:
+            self.drops["unknown_robot"] += 1
+            return False
+        last = self.last.get(obs.robot)
+        if last is not None and obs.stamp_ns <= last[0]:
+            self.drops["stale_stamp"] += 1
+            return False
+        key = (obs.robot, int(obs.stamp_ns))
+        if key in self._queued:
+            self.drops["duplicate_stamp"] += 1
+            return False
+        if len(self._queue) >= self.cfg.max_queue:
+            _, _, _, old = heapq.heappop(self._queue)
+            self._queued.discard((old.robot, old.stamp_ns))
+            self.drops["queue_overflow"] += 1
+        heapq.heappush(self._queue, (int(obs.stamp_ns), self.robots.index(obs.robot), self._seq, obs))
+        self._queued.add(key)
+        self._seq += 1
+        self._latest_obs[obs.robot] = max(self._latest_obs.get(obs.robot, 0), int(obs.stamp_ns))
+        self.now_ns = max(self.now_ns, int(obs.stamp_ns))
+        if self._first_ns is None:
+            self._first_ns = int(obs.stamp_ns)
+        return True
+
+    @property
+    def queued(self) -> int:
+        """Observation sets waiting."""
+        return len(self._queue)
+
+    def release(self, flush: bool, more: Callable[[], bool]) -> Iterator[ObservationSet]:
+        """The sets that are due (all of them with ``flush``), in stamp order, each taken off the
+        queue before it is yielded, while ``more()``; a due set whose robot has no odometry at its
+        stamp is dropped (counted)."""
+        while self._queue and more():
+            stamp, _, _, obs = self._queue[0]
+            overdue = flush or self.now_ns - stamp > self._wait_ns
+            if not overdue and not self._others_caught_up(obs.robot, stamp):
+                return
+            buf = self._odom[obs.robot]
+            if not buf or buf[-1][0] < stamp:
+                if not overdue:
+                    return  # its odometry is still on the way
+                self._pop()
+                self.drops["no_odometry_at_stamp"] += 1
+                continue
+            self._pop()
+            yield obs
+
+    def _pop(self) -> None:
+        stamp, _, _, obs = heapq.heappop(self._queue)
+        self._queued.discard((obs.robot, stamp))
+
+    def _others_caught_up(self, robot: str, stamp: int) -> bool:
+        for other in self.robots:
+            # a robot not heard from yet is waited for from the team's first set on
+            latest = self._latest_obs.get(other, self._first_ns - 1)
+            if other == robot or self.now_ns - latest > self._wait_ns:
+                continue  # a robot silent for longer than max_wait is not waited for
+            if latest < stamp:
+                return False
+        return True
+
+    def pair(self, obs: ObservationSet) -> Pairing | None:
+        """The odometry of a released set; None, counted, if its stamp is older than the robot's
+        buffered odometry or falls in a hole longer than ``max_odom_gap``."""
+        buf = self._odom[obs.robot]
+        if obs.stamp_ns < buf[0][0]:
+            self.drops["no_odometry_at_stamp"] += 1
+            return None
+        t = np.fromiter((s for s, _ in buf), float, len(buf))
+        i = int(np.searchsorted(t, obs.stamp_ns))
+        if 0 < i < len(t) and t[i] != obs.stamp_ns and (t[i] - t[i - 1]) * 1e-9 > self.cfg.max_odom_gap:
+            self.drops["odometry_gap"] += 1
+            return None
+        poses = np.array([p for _, p in buf])
+        odom = interpolate_poses(np.array([float(obs.stamp_ns)]), t, poses)[0]
+        prev = self.last.get(obs.robot)
+        reference = buf[0][1] if prev is None else prev[1]
+        return Pairing(odom, reference, None if prev is None else prev[0], buf[0][0], t, poses)
+
+    # ------------------------------------------------------------------ checkpoint
+    def state(self) -> dict[str, Any]:
+        """Everything above as JSON values and arrays: ``odom_t_{k}`` int64 (N,) [ns] and
+        ``odom_p_{k}`` (N, 3) per robot index k, ``queue`` ([robot, stamp_ns, arrival]) in release
+        order with the sets' arrays (``queue_*_{i}``), ``last`` (robot: [stamp_ns, x, y, θ])."""
+        queue = sorted(self._queue, key=lambda e: e[:3])
+        out: dict[str, Any] = {
+            "last": {r: [s, *map(float, p)] for r, (s, p) in self.last.items()},
+            "latest_obs": dict(self._latest_obs), "first_ns": self._first_ns, "now_ns": self.now_ns,
+            "seq": self._seq, "queue": [[o.robot, stamp, seq] for stamp, _, seq, o in queue],
+            **sets_state("queue", [o for *_, o in queue]),
+        }
+        for k, r in enumerate(self.robots):
+            out[f"odom_t_{k}"] = np.array([t for t, _ in self._odom[r]], np.int64)
+            out[f"odom_p_{k}"] = np.array([p for _, p in self._odom[r]], float).reshape(-1, 3)
+        return out
+
+    def load_state(self, state: dict[str, Any]) -> None:
+        """Take the state :meth:`state` gave (into a new part, of the same robots)."""
+        self.last = {r: (int(v[0]), np.array(v[1:], float)) for r, v in state["last"].items()}
+        self._latest_obs = {r: int(v) for r, v in state["latest_obs"].items()}
+        self._first_ns = state["first_ns"]
+        self.now_ns, self._seq = int(state["now_ns"]), int(state["seq"])
+        for k, r in enumerate(self.robots):
+            self._odom[r].extend(zip(state[f"odom_t_{k}"].tolist(), state[f"odom_p_{k}"]))
+        for i, (robot, stamp, seq) in enumerate(state["queue"]):
+            obs = set_from_state(state, "queue", i, robot, stamp)
+            self._queue.append((int(stamp), self.robots.index(robot), int(seq), obs))
+            self._queued.add((robot, int(stamp)))
+        heapq.heapify(self._queue)
