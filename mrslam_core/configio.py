@@ -264,14 +264,29 @@ def unflatten(flat: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
-def positive_int(text: str) -> int:
-    """An argparse type: an integer >= 1 (a team size, a count)."""
+def _bounded(text: str, kind: type, low: float, strict: bool, what: str):
+    """An argparse value of type ``kind`` (int or float), finite, above ``low`` (or at least, unless ``strict``)."""
     import argparse
 
     try:
-        value = int(text)
+        value = kind(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be at least 1, got {value}")
+        raise argparse.ArgumentTypeError(f"expected {'an integer' if kind is int else 'a number'}, got {text!r}") from None
+    if not (value > low if strict else value >= low) or value == float("inf"):
+        raise argparse.ArgumentTypeError(f"must be {what}, got {text}")
     return value
+
+
+def positive_int(text: str) -> int:
+    """An argparse type: an integer >= 1 (a team size, a count)."""
+    return _bounded(text, int, 1, False, "at least 1")
+
+
+def non_negative_int(text: str) -> int:
+    """An argparse type: an integer >= 0 (a seed)."""
+    return _bounded(text, int, 0, False, ">= 0")
+
+
+def positive_float(text: str) -> float:
+    """An argparse type: a finite number > 0 (a duration)."""
+    return _bounded(text, float, 0.0, True, "> 0")

@@ -40,7 +40,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from mrslam_core.configio import positive_int
+from mrslam_core.configio import non_negative_int, positive_float, positive_int
 from mrslam_core.errors import InputError
 from mrslam_core.evaluation.metrics import longest_stay
 from mrslam_core.evaluation.report import latency_summary
@@ -265,28 +265,6 @@ def summarize(records: list[dict]) -> tuple[dict, list[str]]:
     return summary, lines
 
 
-def _non_negative(text: str) -> int:
-    """An argparse type: an integer >= 0 (a seed)."""
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"must be >= 0, got {value}")
-    return value
-
-
-def _positive_float(text: str) -> float:
-    """An argparse type: a finite number > 0 (a duration)."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-    if not 0 < value < float("inf"):
-        raise argparse.ArgumentTypeError(f"must be > 0, got {text}")
-    return value
-
-
 def main(argv: list[str]) -> int:
     ap = argparse.ArgumentParser(prog="mrslam experiment sweep", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -295,11 +273,11 @@ def main(argv: list[str]) -> int:
     ap.add_argument("--suite", type=positive_int, metavar="N",
                     help="add N generated worlds: office, ring, open, warehouse in turn, seeds 0..N-1, "
                          "start modes together/apart alternating")
-    ap.add_argument("--seeds", type=_non_negative, nargs="+", default=[0], metavar="S",
+    ap.add_argument("--seeds", type=non_negative_int, nargs="+", default=[0], metavar="S",
                     help="simulator and filter seeds (default 0)")
     ap.add_argument("--robots", type=positive_int, default=3, metavar="K",
                     help="team size: the worlds' first K start poses (default 3)")
-    ap.add_argument("--seconds", type=_positive_float, metavar="T",
+    ap.add_argument("--seconds", type=positive_float, metavar="T",
                     help=f"simulated time per run (default {RUN_FACTOR:g} × the reference's time to "
                          f"{100 * EXPLORED:g} %%)")
     ap.add_argument("--jobs", type=positive_int, default=2, metavar="J", help="runs in parallel processes (default 2)")
