@@ -7,7 +7,8 @@ robot's pose of the same stamp (the frontend stamps a scan and its observation s
 pair's stamp, and the SLAM node stamps the pose of that set with it): the latest pose is a frame
 or two older than a new scan, and a robot turning at 0.5 rad/s would lay its scans 3-6° off,
 eroding the walls at door frames that the planner then cuts through. A scan whose pose never
-comes (its set dropped by the SLAM node) is counted, not inserted. Publishes ``/map``
+comes (its set dropped by the SLAM node) is counted, not inserted; drops and stops go out on
+``/diagnostics``. Publishes ``/map``
 (OccupancyGrid; the grid grows with the scans, and info.origin, width and height with it) and
 ``/exploration/frontiers`` (MarkerArray: one sphere per candidate target of the last plan) on
 one timer, ``/<robot>/cmd_vel``, ``/<robot>/goal`` (PoseStamped) and ``/<robot>/plan`` (Path, the
@@ -17,7 +18,6 @@ A* path to the goal, when it changes) on another.
 from __future__ import annotations
 
 import sys
-from collections import Counter
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -41,6 +41,7 @@ from mrslam_ros.conversions import (
     pose_to_msg,
     stamp_to_ns,
 )
+from mrslam_ros.diagnostics import Diagnostics
 from mrslam_ros.params import declare_config, read_config
 from mrslam_ros.spin import run_node
 from mrslam_ros.sync import ApproximateTimeSync
@@ -94,7 +95,7 @@ class ExploreNode(Node):
         self.explorer = Explorer(self.cfg.exploration, list(self.cfg.robots), Controller(self.cfg.control))
         self.poses: dict[str, np.ndarray] = {}
         self.pose_stamps: dict[str, int] = {}
-        self.drops: Counter[str] = Counter()
+        self.diag = Diagnostics(self)
         #: per robot: its poses (stream 0) and scans (stream 1) paired by exact stamp
         self.scan_sync = {r: ApproximateTimeSync(2, 0, self.cfg.scan_queue) for r in self.cfg.robots}
         self.scans_received = self.scans_inserted = 0
@@ -111,10 +112,15 @@ class ExploreNode(Node):
         self.create_timer(self.cfg.map_period, self.publish_map)
         self.now_ns = 0
 
+    @property
+    def drops(self):
+        """Dropped inputs and stops by reason (also on /diagnostics)."""
+        return self.diag.drops
+
     def on_pose(self, robot: str, msg: PoseWithCovarianceStamped) -> None:
         pose = msg_to_pose(msg.pose.pose)
         if not np.isfinite(pose).all():
-            self.drops["bad_pose"] += 1
+            self.diag.count("bad_pose", "a pose that is not finite")
             return
         self.poses[robot] = pose
         self.pose_stamps[robot] = stamp_to_ns(msg.header.stamp)
@@ -134,7 +140,10 @@ class ExploreNode(Node):
             self.scans_inserted += 1
         # dropped by the synchroniser (overflow, unmatched, late, duplicate) = neither laid nor waiting
         waiting = sum(s.queued()[1] for s in self.scan_sync.values())
-        self.drops["scan_without_pose"] = self.scans_received - self.scans_inserted - waiting
+        lost = self.scans_received - self.scans_inserted - waiting
+        if lost > self.drops["scan_without_pose"]:
+            self.diag.count("scan_without_pose", "a scan whose pose never came (its set dropped by the central node)",
+                            lost - self.drops["scan_without_pose"])
 
     def control(self) -> None:
         if len(self.poses) < len(self.cfg.robots):
@@ -154,9 +163,8 @@ class ExploreNode(Node):
         for robot, (v, w) in commands.items():
             if clock_ns - self.pose_stamps[robot] > self.cfg.pose_timeout * 1e9:
                 v = w = 0.0  # no fresh estimate: stand still rather than drive blind
-                self.drops["stale_pose"] += 1
-                self.get_logger().warning(f"{robot}: no pose for {(clock_ns - self.pose_stamps[robot]) * 1e-9:.1f} s; "
-                                          "stopped", throttle_duration_sec=5.0)
+                self.diag.count("stale_pose", f"{robot}: no pose for {(clock_ns - self.pose_stamps[robot]) * 1e-9:.1f} s; "
+                                "stopped")
             twist = Twist()
             twist.linear.x, twist.angular.z = float(v), float(w)
             self.cmd_pub[robot].publish(twist)
