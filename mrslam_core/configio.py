@@ -135,7 +135,10 @@ def from_dict(cls: type[T], data: dict[str, Any] | None, prefix: str = "") -> T:
     except (TypeError, ValueError) as exc:
         if isinstance(exc, ConfigError):
             raise
-        raise ConfigError(f"{prefix or 'config'}: {exc}") from exc
+        text = str(exc)
+        if text.split(" ", 1)[0] in fields:  # a message about one of the keys: name it in full
+            raise ConfigError(f"{prefix}{text}") from exc
+        raise ConfigError(f"{prefix.rstrip('.') or 'config'}: {text}") from exc
 
 
 def _overlay(base: dict, over: dict) -> dict:

@@ -40,8 +40,8 @@ class GridConfig:
     teammate_radius: float = 0.45
 
     def __post_init__(self) -> None:
-        if not self.resolution > 0:
-            raise ValueError("resolution must be > 0")
+        if not (0 < self.resolution < float("inf") and 0 < self.block < float("inf")):
+            raise ValueError(f"resolution and block must be finite and > 0, got {self.resolution} and {self.block}")
         cells = self.block / self.resolution
         if not (round(cells) >= 1 and abs(cells - round(cells)) < 1e-6):
             raise ValueError(f"block {self.block} m must be a whole multiple (>= 1) of resolution {self.resolution} m")

@@ -19,10 +19,14 @@ def test_declare_override_and_read_back():
         declare_config(node, MrclamConfig())
         assert node.get_parameter("filter.motion.alpha1").value == MrclamConfig().filter.motion.alpha1
         node.set_parameters([Parameter("filter.num_particles", value=42), Parameter("robots", value=[1, 3]),
-                             Parameter("filter.association.mode", value="hungarian")])
+                             Parameter("filter.association.candidate_search", value="spatial")])
         cfg = read_config(node, MrclamConfig)
         assert cfg.filter.num_particles == 42 and cfg.robots == (1, 3)
-        assert cfg.filter.association.mode == "hungarian"
+        assert cfg.filter.association.candidate_search == "spatial"
+        node.set_parameters([Parameter("filter.association.mode", value="hungarian")])
+        with pytest.raises(ConfigError, match="^filter.association.descriptor_trust_gate = 10000.0 does nothing with mode hungarian"):
+            read_config(node, MrclamConfig)  # MR.CLAM trusts barcodes by the ml rule only
+        node.set_parameters([Parameter("filter.association.mode", value="ml")])
         assert cfg.duration is None
         node.set_parameters([Parameter("mode", value="solo")])
         with pytest.raises(ConfigError, match="mode: expected one of"):
