@@ -104,8 +104,10 @@ def test_every_passed_cell_keeps_its_neighbours_on_the_grid():
 def test_block_must_be_whole_cells():
     with pytest.raises(ValueError, match="whole multiple"):
         GridConfig(resolution=0.1, block=0.25)
-    with pytest.raises(ValueError, match="whole multiple"):
+    with pytest.raises(ValueError, match="finite and > 0"):
         GridConfig(resolution=0.1, block=0.0)
+    with pytest.raises(ValueError, match="finite and > 0"):
+        GridConfig(resolution=0.1, block=float("inf"))
     assert OccupancyGrid(GridConfig(resolution=0.05, block=0.3)).block_cells == 6
 
 
