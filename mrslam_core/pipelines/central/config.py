@@ -109,9 +109,6 @@ class CentralConfig:
             odometry over the gap: its observation set is aligned to the best particle's map
             (descriptor matches, RANSAC and least squares, ``fusion`` thresholds) and its
             particles drawn from the fit (stereo points only); 0: never [s].
-        relocalize_when_blind: the gap of ``relocalize_after`` also runs while the robot's sets
-            hold fewer than ``fusion.min_inliers`` points (blind: facing a wall, turning): it moved
-            by odometry alone as much as a silent robot does.
         relocalize_tries: attempts, one a second, before a robot back from a gap is left to
             its odometry (a frame whose matches are bunched up cannot fix the rotation); its
             sets in between move it by odometry only and are counted, not mapped.
@@ -130,13 +127,6 @@ class CentralConfig:
             back by map alignment, as a robot with an unknown start (004 section 5); set it
             above the fastest robot of the team; 0: never [m/s].
         odom_reset_turn_rate: the same for the heading [rad/s].
-        teammate_radius: stereo points within this horizontal distance of another robot's
-            estimated position (base_link), and lower than ``teammate_height``, are that robot's
-            body, not landmarks: they are left out of the set and counted (``on_teammate``, in
-            points). Robots see each other; mapped as landmarks, a teammate's corners would move
-            away with it and pull whoever associates them. Covers the body and the pose's
-            uncertainty (a P3-DX's rear corner is 0.33 m from the axle); 0: off [m].
-        teammate_height: top of the robots' bodies and sensor heads above the floor [m].
         map_check: checking each robot against the older map while it drives.
         filter: the multi-robot filter (and each unknown-start robot's local filter).
         fusion: map alignment and joining of unknown-start robots.
@@ -151,15 +141,12 @@ class CentralConfig:
     merge_every: int = 10
     sample_gap: float = 1.0
     relocalize_after: float = 5.0
-    relocalize_when_blind: bool = False
     relocalize_tries: int = 3
     relocalize_gate: float = 0.5
     relocalize_drift: float = 0.1
     max_odom_gap: float = 1.0
     odom_reset_speed: float = 2.0
     odom_reset_turn_rate: float = 6.0
-    teammate_radius: float = 0.0
-    teammate_height: float = 0.6
     map_check: MapCheckConfig = field(default_factory=MapCheckConfig)
     filter: FilterConfig = field(default_factory=FilterConfig)
     fusion: FusionConfig = field(default_factory=FusionConfig)

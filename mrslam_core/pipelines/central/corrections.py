@@ -1,9 +1,8 @@
 """Corrections: moving a robot of the central filter where its odometry alone would not put it.
 
-A robot back from a gap (silent, or blind with ``relocalize_when_blind``, for longer than
-``relocalize_after``) is placed by aligning its observation set to the map; the motion over a
-long gap (``sample_gap``) is sampled before the set is associated; every ``map_check.every``
-seconds a robot's recent sets are aligned to the older map, and a robot the map disagrees with
+A robot back from a gap (silent for longer than ``relocalize_after``) is placed by aligning its
+observation set to the map; the motion over a long gap (``sample_gap``) is sampled before the set
+is associated; every ``map_check.every`` seconds a robot's recent sets are aligned to the older map, and a robot the map disagrees with
 twice is moved. Each move redraws the robot's pose in every particle from the fit. The mapper
 calls these at fixed points of an update (:meth:`Corrections.before_step`,
 :meth:`Corrections.hold`, :meth:`Corrections.after_step`, :meth:`Corrections.forget`), so the
@@ -52,8 +51,6 @@ class Corrections:
         self.relocalizations: list[dict] = []
         self.map_checks: Counter[str] = Counter()
         self.distrusted: list[tuple[int, int, int]] = []
-        #: stamp of each robot's last set that could re-localise it (relocalize_when_blind) [ns]
-        self._sighted: dict[str, int] = {}
         #: robots back from a gap, not re-localised yet: (attempts left, stamp the gap began [ns])
         self._returning: dict[str, tuple[int, int]] = {}
         #: stamp of each robot's last re-localisation attempt [ns]
@@ -82,15 +79,12 @@ class Corrections:
         motion = self._relocalize_if_back(slam, filt, obs, pairing.previous_ns, motion, path_length)
         return self._sample_gap(filt, obs, pairing, motion)
 
-    def hold(self, obs: ObservationSet, first: bool) -> bool:
+    def hold(self, obs: ObservationSet) -> bool:
         """True if ``obs``'s robot awaits its re-localisation: its pose is in doubt, so the set
-        moves it by odometry only and must not shape the map (counted); otherwise a set the robot
-        could be placed by (or its ``first``) closes a blind spell."""
+        moves it by odometry only and must not shape the map (counted)."""
         if obs.robot in self._returning:
             self.drops["awaiting_relocalization"] += 1
             return True
-        if first or len(obs) >= self.cfg.fusion.min_inliers:
-            self._sighted[obs.robot] = obs.stamp_ns
         return False
 
     def after_step(self, slam: MultiRobotFastSLAM, obs: ObservationSet, odom: np.ndarray) -> None:
@@ -100,7 +94,7 @@ class Corrections:
 
     def forget(self, robot: str) -> None:
         """Drop what is remembered of ``robot`` (its odometry restarted: it is mapped anew)."""
-        for state in (self._returning, self._reloc_tried, self._sighted, self._checked, self._pending, self._agreed):
+        for state in (self._returning, self._reloc_tried, self._checked, self._pending, self._agreed):
             state.pop(robot, None)
         self._recent[robot].clear()
 
@@ -108,7 +102,7 @@ class Corrections:
     def _relocalize_if_back(self, slam: MultiRobotFastSLAM, filt: MultiRobotFastSLAM, obs: ObservationSet,
                             previous_ns: int | None, motion: np.ndarray,
                             path_length: Callable[[str, int, int], float]) -> np.ndarray:
-        """Try to place a central robot whose previous update (or last sighting) is older than
+        """Try to place a central robot whose previous update is older than
         ``relocalize_after``, at most once a second and ``relocalize_tries`` times; the motion
         (3,) left to apply: none once placed."""
         cfg = self.cfg
@@ -117,7 +111,7 @@ class Corrections:
         elif previous_ns is None:
             seen = obs.stamp_ns
         else:
-            seen = self._sighted.get(obs.robot, previous_ns) if cfg.relocalize_when_blind else previous_ns
+            seen = previous_ns
         gap = (obs.stamp_ns - seen) * 1e-9
         tried = self._reloc_tried.get(obs.robot, seen)
         relocalizing = (filt is slam and 0 < cfg.relocalize_after < gap
@@ -318,14 +312,14 @@ class Corrections:
     # ------------------------------------------------------------------ checkpoint
     def state(self) -> dict[str, Any]:
         """Everything above as JSON values and arrays: ``relocalizations``, ``map_checks``,
-        ``distrusted``, ``sighted``, ``returning`` (robot: [attempts left, gap start ns]),
+        ``distrusted``, ``returning`` (robot: [attempts left, gap start ns]),
         ``reloc_tried``, ``checked``, ``agreed``, ``pending`` (robot: [stamp_ns, pose (3), fit (3)]),
         ``recent`` ([robot, stamp_ns, pose (3)] in each robot's order) with the sets' arrays
         (``recent_*_{i}``)."""
         recent = [(r, s, at, o) for r in self.robots for s, at, o in self._recent[r]]
         return {
             "relocalizations": [dict(e) for e in self.relocalizations], "map_checks": dict(self.map_checks),
-            "distrusted": [list(d) for d in self.distrusted], "sighted": dict(self._sighted),
+            "distrusted": [list(d) for d in self.distrusted],
             "returning": {r: list(v) for r, v in self._returning.items()}, "reloc_tried": dict(self._reloc_tried),
             "checked": dict(self._checked), "agreed": dict(self._agreed),
             "pending": {r: [s, *map(float, at), *map(float, fit)] for r, (s, at, fit) in self._pending.items()},
@@ -339,7 +333,6 @@ class Corrections:
         self.relocalizations = [dict(e) for e in state.get("relocalizations", [])]
         self.map_checks = Counter(state.get("map_checks", {}))
         self.distrusted = [tuple(int(x) for x in d) for d in state.get("distrusted", [])]
-        self._sighted = {r: int(v) for r, v in state.get("sighted", {}).items()}
         self._returning = {r: (int(v[0]), int(v[1])) for r, v in state.get("returning", {}).items()}
         self._reloc_tried = {r: int(v) for r, v in state.get("reloc_tried", {}).items()}
         self._checked = {r: int(v) for r, v in state.get("checked", {}).items()}

@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from mrslam_core.geometry.se2 import between, compose, transform_points
+from mrslam_core.geometry.se2 import between, compose
 from mrslam_core.pipelines.central.config import CentralConfig
 from mrslam_core.pipelines.central.corrections import Corrections
 from mrslam_core.pipelines.central.lifecycle import Lifecycle
@@ -160,8 +160,7 @@ class CentralMapper:
         filt = self.lifecycle.local.get(obs.robot, self.slam)
         t0 = time.perf_counter()
         motion = self.corrections.before_step(self.slam, filt, obs, pairing, self.ordering.path_length)
-        obs = self._without_teammates(obs, odom)
-        held = self.corrections.hold(obs, first=pairing.previous_ns is None)
+        held = self.corrections.hold(obs)
         try:
             filt.step([RobotUpdate(obs.robot, obs.stamp_ns, motion, None if held else obs)])
         except FilterInputError:
@@ -185,42 +184,6 @@ class CentralMapper:
         # robot before its merge: its dead-reckoned pose is neither published nor reported
         merged = filt is self.slam and not held
         return Processed(obs.robot, obs.stamp_ns, est.mean[k].copy(), est.cov[k].copy(), odom, ms, merged)
-
-    def _pose_at(self, robot: str, odom: np.ndarray) -> np.ndarray | None:
-        """Where ``robot`` is when its odometry reads ``odom`` (3,): its last estimate moved on by
-        its odometry since (map frame, or its own start frame while not merged); None before
-        its first update."""
-        last = self.ordering.last.get(robot)
-        if not self.trajectory[robot] or last is None:
-            return None
-        return compose(self.trajectory[robot][-1][1], between(last[1], odom))
-
-    def _without_teammates(self, obs: ObservationSet, odom: np.ndarray) -> ObservationSet:
-        """``obs`` without the points on another robot's body (``teammate_radius``)."""
-        cfg = self.cfg
-        if cfg.teammate_radius <= 0 or len(obs) == 0 or cfg.filter.observation_model != "stereo_point" \
-                or obs.robot in self.local:
-            return obs
-        me = self._pose_at(obs.robot, odom)
-        others = []
-        for other in self.robots:
-            if other == obs.robot or other in self.local:
-                continue
-            at = self.ordering.odometry_at(other, obs.stamp_ns)
-            pose = None if at is None else self._pose_at(other, at)
-            if pose is not None:
-                others.append(pose[:2])
-        if me is None or not others:
-            return obs
-        xy = transform_points(me, obs.z[:, :2])
-        d = np.linalg.norm(xy[:, None] - np.array(others)[None], axis=2).min(axis=1)
-        body = (d < cfg.teammate_radius) & (obs.z[:, 2] < cfg.teammate_height)
-        if not body.any():
-            return obs
-        self.drops["on_teammate"] += int(body.sum())
-        keep = ~body
-        return ObservationSet(obs.robot, obs.stamp_ns, obs.z[keep], obs.cov[keep], obs.descriptors[keep],
-                              obs.track_ids[keep])
 
     # ------------------------------------------------------------------ results
     def trajectories(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
