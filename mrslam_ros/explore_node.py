@@ -140,10 +140,8 @@ class ExploreNode(Node):
             self.scans_inserted += 1
         # dropped by the synchroniser (overflow, unmatched, late, duplicate) = neither laid nor waiting
         waiting = sum(s.queued()[1] for s in self.scan_sync.values())
-        lost = self.scans_received - self.scans_inserted - waiting
-        if lost > self.drops["scan_without_pose"]:
-            self.diag.count("scan_without_pose", "a scan whose pose never came (its set dropped by the central node)",
-                            lost - self.drops["scan_without_pose"])
+        self.diag.mirror({"scan_without_pose": self.scans_received - self.scans_inserted - waiting}, "",
+                         "a scan whose pose never came (its set dropped by the central node)")
 
     def control(self) -> None:
         if len(self.poses) < len(self.cfg.robots):

@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import argparse
 import importlib
-import re
 import sys
 import time
 from collections import Counter
@@ -274,8 +273,8 @@ def main(argv: list[str]) -> int:
     if args.view:
         from mrslam_ros.launch import Launcher, LaunchConfig
 
-        robots = sorted({t.split("/")[1] for t in info.topics if re.match(r"^/[^/]+/(pose|observations|stereo/left/image_raw)$", t)})
-        viewer = Launcher(LaunchConfig(nodes=[view_spec(args, robots)], use_sim_time=not args.no_clock), log=sys.stderr)
+        # the view node finds the bag's robots in the graph as the player publishes them
+        viewer = Launcher(LaunchConfig(nodes=[view_spec(args)], use_sim_time=not args.no_clock), log=sys.stderr)
         viewer.start()
     rclpy.init()
     node = rclpy.create_node("mrslam_replay")

@@ -202,7 +202,7 @@ class ViewNode(Node):
     def discover(self) -> None:
         for topic, _ in self.get_topic_names_and_types():
             m = _ROBOT_TOPIC.match(topic)
-            if m and m.group(1) not in ("slam", "exploration"):
+            if m:
                 self.add_robot(m.group(1))
 
     # ------------------------------------------------------------------ streams

@@ -98,8 +98,8 @@ def run(cfg: TeamConfig, progress: bool = False, coverage_every: float = 0.0) ->
     rec = {n: {"t": [0.0], "est": [starts[i]], "gt": [starts[i]], "odom": [starts[i]]} for i, n in enumerate(names)}
     next_control = 0
     control_ns = int(cfg.control_period * 1e9)
-    truth_free = sim.world.reachable_free(cfg.grid.resolution) if hasattr(sim.world, "reachable_free") else None
-    coverage: list[tuple[float, float]] | None = [] if coverage_every > 0 and truth_free is not None else None
+    truth_free = sim.world.reachable_free(cfg.grid.resolution)
+    coverage: list[tuple[float, float]] | None = [] if coverage_every > 0 else None
     next_coverage, coverage_ns = 0, int(coverage_every * 1e9)
     end_ns = int(cfg.seconds * 1e9)
     wall = time.perf_counter()
@@ -144,7 +144,7 @@ def run(cfg: TeamConfig, progress: bool = False, coverage_every: float = 0.0) ->
     _, mean, cov, _, _ = slam.best_map()
     end_s = sim.time_ns * 1e-9
     sim.close()
-    explored = _explored(grid, truth_free, cfg.grid.resolution) if truth_free is not None else None
+    explored = _explored(grid, truth_free, cfg.grid.resolution)
     if coverage is not None and coverage[-1][0] < end_s:
         coverage.append((end_s, explored))
     return {
