@@ -15,7 +15,7 @@ class ControlConfig:
     """How each robot follows its path and frees itself (:class:`~mrslam_core.control.controller.Controller`).
 
     Attributes:
-        platform: the robot driven (body dimensions, speed limits).
+        platform: the robot driven (footprint, camera near limit, speed limits).
         lookahead: pure-pursuit lookahead distance [m].
         keep_arc: where the pure-pursuit arc is tighter than ``max_speed / max_turn_rate``,
             slow down to drive it instead of clipping the turn rate and swinging wide (see
@@ -34,19 +34,18 @@ class ControlConfig:
             occupied cell (rays from the robot's centre), the robot first backs straight away at
             ``recovery_speed``, in steps of ``back_step`` up to ``back_max`` and only where the
             space behind is free, until they no longer do; a turn already begun is not checked
-            again (0: off). The simulated cameras sit 0.12 m ahead of the axle and the stereo
-            near limit is 0.21 m from them, so a turn nearer than 0.33 m to a wall is blind;
-            counted as ``turn_backoffs``. On in the team defaults at 0.6 m: with
-            ``turn_stall_time``, 2 of 78 robots above 0.10 m over 26 closed-loop seeds against 7
-            of 78 without (docs/results.md).
+            again (0: off; else at least the platform's ``camera_near``: a turn whose headings
+            pass a wall nearer than that is blind). Counted as ``turn_backoffs``. On in the team
+            defaults at 0.6 m: with ``turn_stall_time``, 2 of 78 robots above 0.10 m over 26
+            closed-loop seeds against 7 of 78 without (docs/results.md).
         back_max, back_step: see ``turn_clearance`` [m].
         back_fan, back_margin: the robot backs only as far as the fan of ±``back_fan`` [rad]
             (35°) behind its axle is free of occupied cells to the platform's ``rear`` plus
             ``back_margin`` [m] beyond the distance backed.
         turn_stall_time: a robot turning on the spot whose heading moved less than
-            ``turn_stall_angle`` in this long is against something (a door jamb, a teammate: a
-            Pioneer's corners swing out to 0.33 m from its axle) and turns the other way round
-            instead, once per turn; counted as ``blocked_turns`` (0: off) [s].
+            ``turn_stall_angle`` in this long is against something (a door jamb, a teammate: the
+            body's corners swing out to the platform's ``corner_radius``) and turns the other
+            way round instead, once per turn; counted as ``blocked_turns`` (0: off) [s].
         turn_stall_angle: see ``turn_stall_time`` [rad] (5°).
         stall_time: a robot commanded forward for this long (at 0.1 m/s or more on average) that
             covered less than a quarter of the commanded distance is blocked by something its
@@ -86,3 +85,6 @@ class ControlConfig:
             raise ValueError("turn_clearance must be >= 0")
         if not (self.back_step > 0 and self.recovery_speed > 0):
             raise ValueError("back_step and recovery_speed must be > 0")
+        if 0.0 < self.turn_clearance < self.platform.camera_near:
+            raise ValueError(f"turn_clearance {self.turn_clearance} m is inside the camera's near limit "
+                             f"(platform.camera_near {self.platform.camera_near} m): a turn that near is blind")

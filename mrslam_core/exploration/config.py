@@ -26,8 +26,8 @@ class GridConfig:
             frame) ended on that robot's body: it proves the space up to it free and marks no
             obstacle. Robots see each other; mapped, a teammate that drove on leaves an obstacle
             where no one looks again, and inflated for planning it sealed a start room's door
-            (docs/results.md). The simulated Pioneer's body reaches 0.33 m from
-            base_link; 0: off [m].
+            (docs/results.md). Larger than the platform's ``corner_radius``
+            (``ControlConfig.platform``); 0: off [m].
     """
 
     resolution: float = 0.1
@@ -59,7 +59,9 @@ class ExplorationConfig:
         utility_range: max_range of the discount P(d) = 1 − d/max_range [m].
         occ_max: cells with occupancy probability above this are not traversable.
         min_frontier_cells: smaller frontier groups are ignored.
-        robot_radius: obstacles are inflated by this for planning [m].
+        robot_radius: obstacles are inflated by this for planning; at least the platform's
+            ``corner_radius`` (``ControlConfig.platform``, checked by the
+            :class:`~mrslam_core.exploration.explorer.Explorer`) [m].
         min_target_distance: frontier targets closer than this to the robot are skipped (the
             unknown just behind a robot with a forward-looking sensor is not worth a goal) [m].
         goal_tolerance: a goal counts as reached within this distance [m].

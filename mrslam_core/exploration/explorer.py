@@ -62,14 +62,16 @@ def reaches_any(passable: np.ndarray, start: tuple[int, int], cells: np.ndarray)
 
 
 def planning_layers(grid: OccupancyGrid, poses: list[np.ndarray], cfg: ExplorationConfig,
-                    bumps: list[np.ndarray] = (), bump_radius: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+                    bumps: list[np.ndarray] = (), bump_radius: float = 0.0,
+                    unseen: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
     """What paths may cross: (passable (H, W) bool for A*, occupancy (H, W) for the travel cost).
 
     Obstacles (occupied cells, and discs of ``bump_radius`` [m] round ``bumps``, each (x, y) [m]
     map frame, see :func:`disc_cells`) are inflated by ``robot_radius``. Without
     ``unknown_passable`` only cells observed free are passable and unobserved ones cost like
-    obstacles, except within the robot's radius (+ 2 cells) of a robot's pose (x, y, θ): the
-    ground under and just around a robot is never in view, and it must be able to leave it.
+    obstacles, except within the robot's radius, or ``unseen`` [m] (the camera's near limit)
+    where that is larger, + 2 cells of a robot's pose (x, y, θ): the ground under and just
+    around a robot is never in view, and it must be able to leave it.
     """
     blocked = grid.occupied() | disc_cells(grid, list(bumps), bump_radius)
     prob = np.where(blocked, 1.0, grid.probability())
@@ -77,7 +79,7 @@ def planning_layers(grid: OccupancyGrid, poses: list[np.ndarray], cfg: Explorati
     if not cfg.unknown_passable:
         around = np.zeros(grid.shape, bool)
         for pose in poses:
-            around |= surroundings(grid, np.asarray(pose)[:2], cfg.robot_radius)
+            around |= surroundings(grid, np.asarray(pose)[:2], max(cfg.robot_radius, unseen))
         passable &= grid.free() | (around & ~blocked)
         prob = np.where(grid.observed | around, prob, 1.0)
     return passable, prob
@@ -92,6 +94,11 @@ class Explorer:
     (which counts the stalls, recoveries and turns). The grid may grow between calls (its cell
     (0, 0) moves): everything kept from one call to the next (targets, paths, blacklist, bumper
     hits, checkpoints) is in metres, map frame, never grid cells.
+
+    Raises:
+        ValueError: ``config.robot_radius`` is smaller than the controller's platform's
+            ``corner_radius``: paths inflated by less let the body's corners hit what the robot
+            turns beside.
     """
 
     config: ExplorationConfig
@@ -115,6 +122,12 @@ class Explorer:
     #: the candidate targets of the last plan, one per frontier stretch (T, 2) [m] map frame
     frontiers: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
 
+    def __post_init__(self) -> None:
+        body = self.controller.config.platform.corner_radius
+        if self.config.robot_radius < body:
+            raise ValueError(f"exploration robot_radius {self.config.robot_radius} m is smaller than the platform's "
+                             f"corner_radius {body:.3f} m (its footprint's farthest corner from base_link)")
+
     def _replan(self, grid: OccupancyGrid, poses: dict[str, np.ndarray], now: float) -> None:
         cfg = self.config
         free, known = grid.free(), grid.observed
@@ -122,7 +135,8 @@ class Explorer:
         self.plans += 1
         self.last_plan_s = now
         self.known_at_plan = int(grid.observed.sum())
-        passable, prob = planning_layers(grid, [poses[n] for n in self.robots], cfg, self.bumps, self._bump_radius)
+        passable, prob = planning_layers(grid, [poses[n] for n in self.robots], cfg, self.bumps, self._bump_radius,
+                                         self._unseen)
         frontier &= passable  # a frontier the robot cannot stand on (hugging a wall) is not a goal
         waiting = False  # a frontier blocked only for now will be tried again: not complete yet
         if self.blacklist:
@@ -173,10 +187,10 @@ class Explorer:
         and asks again."""
         start = tuple(np.clip(grid.cell_of(poses[name][:2]), 0, np.array(grid.shape) - 1))
         goal = tuple(np.clip(grid.cell_of(target), 0, np.array(grid.shape) - 1))
-        # a robot standing closer than its radius to an obstacle may leave through inflated
-        # cells around it (never through occupied ones)
+        # a robot standing closer than its radius (or its camera's near limit) to an obstacle may
+        # leave through inflated cells around it (never through occupied ones)
         cfg = self.config
-        near = surroundings(grid, poses[name][:2], cfg.robot_radius)
+        near = surroundings(grid, poses[name][:2], max(cfg.robot_radius, self._unseen))
         leave = near & ~grid.occupied() & ~disc_cells(grid, self.bumps, self._bump_radius)
         cost = np.where(grid.observed, 1.0, cfg.unknown_cost) if cfg.unknown_cost > 1 else None
         path = astar(passable | leave, start, goal, cost)
@@ -189,6 +203,11 @@ class Explorer:
             return
         path_xy = grid.centre_of(np.array(path))
         self.goals[name] = Goal(np.asarray(target, float), path_xy, now)
+
+    @property
+    def _unseen(self) -> float:
+        """Radius [m] round a robot that its camera never sees: the platform's ``camera_near``."""
+        return self.controller.config.platform.camera_near
 
     @property
     def _bump_radius(self) -> float:

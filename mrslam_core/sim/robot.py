@@ -1,4 +1,5 @@
-"""The Pioneer 3-DX model: URDF text and the fixed camera extrinsics, both from the config.
+"""The Pioneer 3-DX model: URDF text and the fixed camera extrinsics, both from the config (the
+body's footprint from :class:`~mrslam_core.control.platform.PlatformConfig`'s defaults).
 
 Frames: base_link on the floor midway between the wheels (x forward, y left, z up);
 camera_link at the middle of the stereo head (x forward); camera_{left,right}_optical_frame at
@@ -11,14 +12,15 @@ from pathlib import Path
 
 import numpy as np
 
+from mrslam_core.control.platform import PlatformConfig
 from mrslam_core.sim.config import DriveConfig, StereoCameraConfig
 
 BASE_URDF = Path(__file__).resolve().parent / "data" / "pioneer3dx.urdf"
 
 # base_link <- optical: optical z (forward) = base x, optical x (right) = −base y, optical y (down) = −base z
 R_BASE_OPTICAL = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
-BODY_FRONT = 0.185  # body box front face ahead of base_link [m] (see the URDF)
-BODY_TOP = 0.275  # top plate [m]
+BODY_TOP = 0.275  # top of the top plate above the floor [m] (see the URDF)
+PLATE_INSET = 0.01  # the top plate's edge inside the body's [m]
 
 
 def camera_extrinsic(camera: StereoCameraConfig, side: str = "left") -> np.ndarray:
@@ -49,8 +51,9 @@ def _visual(geometry: str, material: str, xyz: tuple[float, ...] = (0, 0, 0), rp
             f'{rpy[2]:.9g}"/>\n      <geometry>{geometry}</geometry>\n      <material name="{material}"/>\n    </visual>\n')
 
 
-def robot_description(camera: StereoCameraConfig, drive: DriveConfig) -> str:
-    """URDF of the robot with wheels at ±track/2 and the stereo head where ``camera`` puts it.
+def robot_description(camera: StereoCameraConfig, drive: DriveConfig, body: PlatformConfig | None = None) -> str:
+    """URDF of the robot with the footprint of ``body`` (default: ``PlatformConfig()``, the
+    simulated Pioneer), wheels at ±track/2 and the stereo head where ``camera`` puts it.
 
     The wheels are fixed links (the simulator drives the base kinematically); the optical frames
     match :func:`camera_extrinsic`.
@@ -69,6 +72,11 @@ def robot_description(camera: StereoCameraConfig, drive: DriveConfig) -> str:
     for side, y in (("left", camera.baseline / 2), ("right", -camera.baseline / 2)):
         parts += [_link(f"camera_{side}_optical_frame"),
                   _fixed("camera_link", f"camera_{side}_optical_frame", (0.0, y, 0.0), (-np.pi / 2, 0.0, -np.pi / 2))]
+    body = body or PlatformConfig()
+    fill = {"centre_x": body.centre_x, "length": body.length, "width": body.width,
+            "plate_length": body.length - 2 * PLATE_INSET, "plate_width": body.width - 2 * PLATE_INSET}
     base = BASE_URDF.read_text()
+    for key, value in fill.items():
+        base = base.replace("{" + key + "}", f"{value:.6g}")
     end = base.rindex("</robot>")
     return base[:end] + "".join(parts) + base[end:]

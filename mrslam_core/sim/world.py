@@ -36,13 +36,15 @@ import numpy as np
 import yaml
 from scipy import ndimage
 
+from mrslam_core.control.platform import PlatformConfig
 from mrslam_core.sim.errors import SimError
 
 BUILTIN = Path(__file__).resolve().parent / "worlds"
 TEXTURES = ("unique", "repetitive", "plain")
-#: half the width of the simulated Pioneer's body (sim/data/pioneer3dx.urdf: 0.45 × 0.38 m): a
-#: start pose nearer than this to a solid puts the robot inside it [m]
-ROBOT_HALF_WIDTH = 0.19
+#: half the width of the simulated robot's body (its footprint: ``PlatformConfig``'s defaults,
+#: which the simulator builds the body from): a start pose nearer than this to a solid puts the
+#: robot inside it [m]
+ROBOT_HALF_WIDTH = PlatformConfig().width / 2
 #: the clearance [m] of "reachable": a robot's centre keeps this far from every solid (passages
 #: narrower than twice this do not connect), in reachable_free and the start-pose check
 REACH_RADIUS = 0.25

@@ -236,3 +236,38 @@ def test_simulation_exploration_and_control_do_not_import_each_other(package, fo
         bad = {m for m in _imports(path) for f in forbidden
                if m == f"mrslam_core.{f}" or m.startswith(f"mrslam_core.{f}.")}
         assert not bad, (path.name, bad)
+
+
+def test_the_platform_footprint_and_near_limit():
+    """The default footprint is the simulated Pioneer's body: 0.45 × 0.38 m, its centre 0.04 m
+    behind base_link, its corners hypot(0.265, 0.19) = 0.326 m from it; a footprint with no area,
+    a bumper inside the body and a back-off before turns that ends inside the camera's near
+    limit are refused."""
+    p = PlatformConfig()
+    assert (p.length, p.width, p.centre_x) == pytest.approx((0.45, 0.38, -0.04))
+    assert p.corner_radius == pytest.approx(np.hypot(0.265, 0.19))
+    long_nose = PlatformConfig(front=0.5, rear=0.1, width=0.2, bumper_range=0.6)
+    assert long_nose.corner_radius == pytest.approx(np.hypot(0.5, 0.1))
+    for bad in ({"width": 0.0}, {"front": -0.3, "rear": 0.2}, {"bumper_range": 0.1}, {"camera_near": -0.1}):
+        with pytest.raises(ValueError):
+            PlatformConfig(**bad)
+    with pytest.raises(ValueError, match="near limit"):
+        ControlConfig(turn_clearance=0.3)  # the camera sees nothing nearer than 0.34 m
+    assert ControlConfig(turn_clearance=0.3, platform=PlatformConfig(camera_near=0.3)).turn_clearance == 0.3
+
+
+def test_the_simulated_body_is_the_platform_footprint():
+    """The simulator builds the robot's collision box from PlatformConfig's footprint: the box
+    spans x from -rear to front and y ±width/2 in base_link."""
+    import xml.etree.ElementTree as ET
+
+    from mrslam_core.sim.config import DriveConfig, StereoCameraConfig
+    from mrslam_core.sim.robot import robot_description
+
+    p = PlatformConfig()
+    base = next(link for link in ET.fromstring(robot_description(StereoCameraConfig(), DriveConfig())).iter("link")
+                if link.get("name") == "base_link")
+    box = base.find("collision/geometry/box")
+    x = float(base.find("collision/origin").get("xyz").split()[0])
+    length, width, _ = (float(v) for v in box.get("size").split())
+    assert (x - length / 2, x + length / 2, width) == pytest.approx((-p.rear, p.front, p.width))

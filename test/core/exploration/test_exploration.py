@@ -2,6 +2,8 @@
 A*, the occupancy grid, the explorer with its controller, and a seeded 2D run that explores and
 stops."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -17,6 +19,10 @@ from mrslam_core.exploration.grid import OccupancyGrid, Scan
 from mrslam_core.exploration.planning import astar
 from mrslam_core.pipelines.sim2d import TeamSim2D
 from mrslam_core.sim.world import load_world
+
+#: a robot small enough for the 0.2 m robot_radius of the room tests (corner_radius 0.14 m), its
+#: camera's near limit no farther than that radius
+SMALL = PlatformConfig(front=0.1, rear=0.1, width=0.2, camera_near=0.2)
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
@@ -189,7 +195,7 @@ def test_a_stalled_robot_marks_a_bumper_hit_backs_off_and_plans_around_it():
 
     grid = _open_room()
     cfg = ExplorationConfig(robot_radius=0.2, min_target_distance=0.5)
-    ctl = ControlConfig(stall_time=1.5, platform=PlatformConfig(bumper_range=0.3))
+    ctl = ControlConfig(stall_time=1.5, platform=replace(SMALL, bumper_range=0.3))
     ex = Explorer(cfg, ["r"], Controller(ctl))
     pose = np.array([0.5, 2.0, 0.0])
     cmds = [ex.step(grid, {"r": pose}, 0.2 * i)["r"] for i in range(9)]  # 0 … 1.6 s
@@ -218,7 +224,7 @@ def test_a_robot_that_could_not_back_off_pulls_forward_next_time():
     from mrslam_core.exploration.explorer import Explorer
 
     cfg = ExplorationConfig(robot_radius=0.2, min_target_distance=0.5, progress_timeout=2.0)
-    ctl = ControlConfig(recovery_time=1.0)
+    ctl = ControlConfig(recovery_time=1.0, platform=SMALL)
 
     def recoveries(moves_when_backing: bool) -> list[float]:
         """The sign of v at the start of each of the first three recoveries."""
@@ -251,7 +257,7 @@ def test_a_boxed_in_robot_recovers_and_blacklists_no_target():
     ring = np.abs(np.hypot(rr - 20, cc - 10) - 5.0) <= 0.5
     grid.logodds[ring] = 3.0
     cfg = ExplorationConfig(robot_radius=0.2, min_target_distance=0.5)
-    ex = Explorer(cfg, ["robot1", "robot2"])
+    ex = Explorer(cfg, ["robot1", "robot2"], Controller(ControlConfig(platform=SMALL)))
     poses = {"robot1": np.array([1.05, 2.05, 0.0]), "robot2": np.array([2.5, 3.0, 0.0])}
     cmds = ex.step(grid, poses, 0.0)
     assert ex.controller.recovery.boxed_in == 1 and ex.blacklist == [] and ex.strikes == []
@@ -280,7 +286,7 @@ def test_a_robot_that_follows_its_commands_never_stalls():
 
     grid = _open_room()
     ex = Explorer(ExplorationConfig(robot_radius=0.2, min_target_distance=0.5), ["r"],
-                  Controller(ControlConfig(stall_time=1.5)))
+                  Controller(ControlConfig(stall_time=1.5, platform=SMALL)))
     pose = np.array([0.5, 2.0, 0.0])
     for i in range(40):
         v, w = ex.step(grid, {"r": pose}, 0.2 * i)["r"]
@@ -294,7 +300,8 @@ def test_robots_stand_still_at_the_start_for_start_delay():
     from mrslam_core.exploration.explorer import Explorer
 
     grid = _open_room()
-    ex = Explorer(ExplorationConfig(robot_radius=0.2, min_target_distance=0.5, start_delay=1.0), ["r"])
+    ex = Explorer(ExplorationConfig(robot_radius=0.2, min_target_distance=0.5, start_delay=1.0), ["r"],
+                  Controller(ControlConfig(platform=SMALL)))
     pose = np.array([0.5, 2.0, 0.0])
     cmds = [ex.step(grid, {"r": pose}, 5.0 + 0.2 * i)["r"] for i in range(7)]  # 5.0 ... 6.2 s
     assert all(c == (0.0, 0.0) for c in cmds[:5]), cmds
@@ -369,3 +376,21 @@ def test_a_turn_on_the_spot_that_does_not_turn_goes_the_other_way_round_once(wal
     for i, t in enumerate(np.arange(0.2, 3.0, 0.2)):
         assert free.step(grid, {"r": np.array([2.0, 2.0, 0.1 * i])}, t)["r"] == (0.0, 0.5)
     assert free.controller.follower.blocked_turns == 0
+
+
+def test_the_explorer_inflates_by_at_least_the_platform_and_leaves_its_unseen_ground():
+    """robot_radius below the platform's corner_radius is refused. Without unknown_passable a
+    robot may leave through the unobserved ground within max(robot_radius, camera_near) + 2
+    cells of it: its camera never saw it."""
+    from mrslam_core.exploration.explorer import Explorer, planning_layers
+
+    with pytest.raises(ValueError, match="corner_radius"):
+        Explorer(ExplorationConfig(robot_radius=0.3), ["r"])  # the Pioneer's corners: 0.326 m
+    grid = OccupancyGrid(GridConfig(resolution=0.1), extent=((0.0, 0.0), (6.0, 4.0)))
+    cfg = ExplorationConfig(robot_radius=0.2, unknown_passable=False)
+    robot = np.array([2.05, 2.05, 0.0])
+    near, _ = planning_layers(grid, [robot], cfg)
+    wide, _ = planning_layers(grid, [robot], cfg, unseen=0.5)
+    # nothing observed: passable are the cells whose centres lie within 0.2 m + 2 cells = 4 cells
+    # of the robot's cell centre (49 of them), with unseen 0.5 m within 7 cells (149)
+    assert near.sum() == 49 and wide.sum() == 149 and (wide | near).sum() == wide.sum()

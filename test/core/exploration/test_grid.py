@@ -8,6 +8,9 @@ Map frame: x east, y north [m]; grid cells (row, col) = (y, x); world cell (I, J
 import numpy as np
 import pytest
 
+from mrslam_core.control.config import ControlConfig
+from mrslam_core.control.controller import Controller
+from mrslam_core.control.platform import PlatformConfig
 from mrslam_core.exploration.config import ExplorationConfig, GridConfig
 from mrslam_core.exploration.coverage import explored_fraction
 from mrslam_core.exploration.explorer import Explorer
@@ -170,7 +173,8 @@ def test_the_explorer_keeps_its_goal_when_the_grid_grows_between_steps():
     grid.observed[:, :40] = True
     grid.logodds[:, :40] = -3.0
     grid.logodds[[0, 39], :40] = grid.logodds[:, 0] = 3.0  # walls
-    ex = Explorer(ExplorationConfig(robot_radius=0.2), ["robot1"])
+    small = PlatformConfig(front=0.1, rear=0.1, width=0.2, camera_near=0.2)  # fits the 0.2 m robot_radius
+    ex = Explorer(ExplorationConfig(robot_radius=0.2), ["robot1"], Controller(ControlConfig(platform=small)))
     pose = {"robot1": np.array([1.0, 2.0, 0.0])}
     ex.step(grid, pose, 0.0)
     goal = ex.goals["robot1"]

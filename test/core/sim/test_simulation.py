@@ -11,8 +11,11 @@ import cv2
 import numpy as np
 import pytest
 
+from mrslam_core.control.platform import PlatformConfig
 from mrslam_core.sim import DriveConfig, OdometryNoiseConfig, SimConfig, SimError, Simulation, StereoCameraConfig
-from mrslam_core.sim.robot import BODY_FRONT
+
+BODY = PlatformConfig()  # the simulated body's footprint
+BODY_FRONT = BODY.front  # its front face ahead of base_link [m]
 
 NO_NOISE = OdometryNoiseConfig(scale_error_left=0, scale_error_right=0, track_error=0, translation_var_per_m=0,
                                heading_var_per_m=0, heading_var_per_rad=0)
@@ -58,12 +61,12 @@ def test_robot_stops_at_a_wall_and_at_another_robot():
         x, y, th = sim.ground_truth("r")
         assert 5.95 - BODY_FRONT - 0.03 < x < 5.95 - BODY_FRONT + 0.01
         assert abs(y - 2.5) < 0.02 and abs(th) < 0.02
-        # and another robot does not drive through it (rear of r's body is 0.265 m behind base_link)
+        # and another robot does not drive through it (rear of r's body is BODY.rear behind base_link)
         sim.add_robot("s", np.array([4.0, 2.5, 0.0]))
         sim.set_command("r", 0.0, 0.0)
         sim.set_command("s", 0.4, 0.0)
         sim.run_until(sim.time_ns + int(4e9))
-        assert sim.ground_truth("s")[0] < sim.ground_truth("r")[0] - 0.265 - BODY_FRONT + 0.03
+        assert sim.ground_truth("s")[0] < sim.ground_truth("r")[0] - BODY.rear - BODY_FRONT + 0.03
 
 
 def test_wheels_do_not_slip_sideways_against_a_wall():
