@@ -50,29 +50,6 @@ def sym_inv_det(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.linalg.inv(a), np.linalg.det(a)
 
 
-def sym3_inv_quad_det(p, q, s, d, e, f, x, y, z) -> tuple[np.ndarray, np.ndarray]:
-    """vᵀ A⁻¹ v and det A for the symmetric 3×3 A = [[p, q, s], [q, d, e], [s, e, f]] and v = (x, y, z),
-    given as its six distinct terms (arrays of one shape), from the adjugate."""
-    c00 = d * f - e * e
-    c01 = s * e - q * f
-    c02 = q * e - s * d
-    det = p * c00 + q * c01 + s * c02
-    num = c00 * x * x + (p * f - s * s) * y * y + (p * d - q * q) * z * z
-    num += 2.0 * (c01 * x * y + c02 * x * z + (q * s - p * e) * y * z)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return num / det, det
-
-
-def inv_quad_det(a: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """vᵀ A⁻¹ v and det A for symmetric A (..., n, n), v (..., n), without forming A⁻¹ (n ≤ 3)."""
-    n = a.shape[-1]
-    if n == 3:
-        return sym3_inv_quad_det(a[..., 0, 0], a[..., 0, 1], a[..., 0, 2], a[..., 1, 1], a[..., 1, 2], a[..., 2, 2],
-                                 v[..., 0], v[..., 1], v[..., 2])
-    inv, det = sym_inv_det(a)
-    return quad_form(v, inv), det
-
-
 def quad_form(v: np.ndarray, a: np.ndarray) -> np.ndarray:
     """vᵀ A v for stacks v (..., n) and symmetric A (..., n, n) -> (...)."""
     n = v.shape[-1]
@@ -100,43 +77,3 @@ def is_positive_definite(a: np.ndarray) -> np.ndarray:
         if n > 3:
             ok &= np.all(np.linalg.eigvalsh(a) > 0, axis=-1)
     return ok
-
-
-def rotate_z_sym3(a: np.ndarray, theta: np.ndarray) -> np.ndarray:
-    """Rz(θ) · A · Rz(θ)ᵀ for symmetric A (..., 3, 3) and angles θ (rad); shapes broadcast."""
-    c, s = np.cos(theta), np.sin(theta)
-    axx, axy, axz = a[..., 0, 0], a[..., 0, 1], a[..., 0, 2]
-    ayy, ayz, azz = a[..., 1, 1], a[..., 1, 2], a[..., 2, 2]
-    cc, ss, cs = c * c, s * s, c * s
-    xx = cc * axx - 2 * cs * axy + ss * ayy
-    shape = xx.shape
-    out = np.empty(shape + (3, 3))
-    out[..., 0, 0] = xx
-    out[..., 1, 1] = ss * axx + 2 * cs * axy + cc * ayy
-    out[..., 0, 1] = out[..., 1, 0] = cs * (axx - ayy) + (cc - ss) * axy
-    out[..., 0, 2] = out[..., 2, 0] = c * axz - s * ayz
-    out[..., 1, 2] = out[..., 2, 1] = s * axz + c * ayz
-    out[..., 2, 2] = np.broadcast_to(azz, shape)
-    return out
-
-
-def sym3_kalman(sig: np.ndarray, s: np.ndarray, diff: np.ndarray):
-    """Kalman step with H = I for stacks of 3×3 symmetric Σ (…, 3, 3), S = Σ + R and innovation
-    ν (…, 3): returns (Σ S⁻¹ ν, Σ − Σ S⁻¹ Σ, νᵀ S⁻¹ ν, det S), written out entry by entry
-    (about three times faster than batched matmul for small matrices)."""
-    a, det = sym_inv_det(s)
-    # T = Σ · S⁻¹ (general 3×3)
-    t = np.empty_like(sig)
-    for i in range(3):
-        for j in range(3):
-            t[..., i, j] = sig[..., i, 0] * a[..., 0, j] + sig[..., i, 1] * a[..., 1, j] + sig[..., i, 2] * a[..., 2, j]
-    shift = np.stack(
-        [t[..., i, 0] * diff[..., 0] + t[..., i, 1] * diff[..., 1] + t[..., i, 2] * diff[..., 2] for i in range(3)], -1
-    )
-    new = np.empty_like(sig)
-    for i in range(3):
-        for j in range(i, 3):
-            v = sig[..., i, j] - (t[..., i, 0] * sig[..., 0, j] + t[..., i, 1] * sig[..., 1, j] + t[..., i, 2] * sig[..., 2, j])
-            new[..., i, j] = v
-            new[..., j, i] = v
-    return shift, new, quad_form(diff, a), det

@@ -2,8 +2,9 @@
 
 Synthetic stereo world, K robots, B observations per robot and step, a map of N landmarks already
 held by every particle (shared from a common ancestor, each particle's own near the robots); a step = every robot's motion sample, association, EKF updates, new
-landmarks and weighting, plus resampling when due. Single-threaded numpy (set
-OMP/OPENBLAS threads to 1 before numpy loads for a one-core figure).
+landmarks and weighting, plus resampling when due. Single-threaded: numpy and the filter's numba
+kernels (compiled on first use and cached; set OMP/OPENBLAS threads to 1 before numpy loads for a
+one-core figure).
 """
 
 from __future__ import annotations

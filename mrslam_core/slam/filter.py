@@ -25,10 +25,12 @@ from scipy.stats import chi2
 from mrslam_core.geometry.se2 import wrap_angle
 from mrslam_core.linalg import is_positive_definite, quad_form, sym_inv_det
 from mrslam_core.slam.association import associate_hungarian, associate_ml, resolve_conflicts
+from mrslam_core.slam.association_kernels import ml_cost
 from mrslam_core.slam.config import FilterConfig
 from mrslam_core.slam.landmarks import LandmarkStore
 from mrslam_core.slam.models import ObservationModel, RangeBearingModel, make_model
 from mrslam_core.slam.motion import predict_motion, sample_motion
+from mrslam_core.slam.proposal_kernels import sum_by
 from mrslam_core.slam.resampling import (
     copy_plan,
     effective_sample_fraction,
@@ -44,11 +46,6 @@ LOG_2PI = float(np.log(2.0 * np.pi))
 #: |measurement| components [m or rad], and measurement/sighting variances [m², rad²].
 MAX_ABS_INPUT = 1e4
 VARIANCE_BOUNDS = (1e-12, 1e8)
-
-
-def _sum_by(index: np.ndarray, values: np.ndarray, n: int) -> np.ndarray:
-    """Row sums of ``values`` (P, C) grouped by ``index`` (P,) into (n, C) (``np.add.at``, faster)."""
-    return np.stack([np.bincount(index, values[:, c], n) for c in range(values.shape[1])], axis=1)
 
 
 class FilterInputError(ValueError):
@@ -333,7 +330,7 @@ class MultiRobotFastSLAM:
         if b == 0:
             if motion_cov is not None:
                 empty = np.zeros(0, np.int64)
-                self._sample_proposal(k, empty, z, r, z, r, motion_cov, log_l)
+                self._sample_proposal(k, empty, empty, z, r, empty, motion_cov, log_l)
             return 0, 0
         cfg = self.config.association
         store = self.landmarks
@@ -372,31 +369,32 @@ class MultiRobotFastSLAM:
         vb, vc = np.nonzero(cand >= 0)  # the V (observation, candidate) pairs worth scoring
         vslots = cand[vb, vc]
         if vb.size:
-            mu, sig, held = store.gather(np.arange(m)[:, None], vslots[None], ("mean", "cov", "exists"))
+            rows = store.rows(np.arange(m)[:, None], vslots[None])  # (M, V) pool rows of the pairs
+            (held,) = store.gather_rows(rows, ("exists",))
             if cfg.min_observations > 1:
-                (count,) = store.gather(np.arange(m)[:, None], vslots[None], ("count",))
+                (count,) = store.gather_rows(rows, ("count",))
                 confirmed = count >= cfg.min_observations
             else:
                 confirmed = held
-            p_cov = None if motion_cov is None else motion_cov[:, None]
-            maha, log_norm = model.score(poses[:, None, :], z[None], r[None], mu, sig, p_cov, index=vb)
-            feasible = held & (maha <= cfg.mahalanobis_gate)
+            maha, log_norm = model.score_rows(
+                poses, z, r, store.field_rows("mean"), store.field_rows("cov"), rows, vb, motion_cov,
+                with_norm=cfg.mode != "ml",
+            )
             if cfg.mode == "ml":
                 geo = cfg.geometry_weight * cfg.descriptor_gate / cfg.mahalanobis_gate
-                cost = np.where(feasible, e[vb, vc][None] + (geo + 1e-9) * maha, np.inf)
-                cost = np.where(feasible & ~confirmed, cost + 1e3, cost)  # landmarks first
-                if cfg.descriptor_trust_gate > cfg.mahalanobis_gate:
-                    trusted = held & ~feasible & (maha <= cfg.descriptor_trust_gate)
-                    cost = np.where(trusted, 1e6 + maha, cost)  # only where nothing passes D0
-                if memory is not None:
-                    same = (vslots[None] == track_slot[:, vb]) & held & (maha <= cfg.track_gate)
-                    cost = np.where(same, -1.0, cost)  # a continuing track keeps its landmark
+                cost = np.empty(maha.shape)
+                ml_cost(
+                    maha, held, confirmed, np.ascontiguousarray(e[vb, vc]), cfg.mahalanobis_gate, geo + 1e-9,
+                    cfg.descriptor_trust_gate, np.zeros((0, 0), np.int64) if memory is None else track_slot,
+                    vslots, vb, cfg.track_gate, cost,
+                )
                 pair = associate_ml(cost, vb, vc, b, cand.shape[1])
                 if np.unique(vslots).size < vslots.size:  # else no two observations share a slot
                     pair, n = resolve_conflicts(pair, vslots, cost)
                     if n:
                         self.dropped["duplicate_association"] += n
             else:
+                feasible = held & (maha <= cfg.mahalanobis_gate)
                 ll = np.where(feasible, -0.5 * (maha + log_norm), -np.inf)
                 pair = associate_hungarian(np.where(confirmed, ll, -np.inf), vb, vslots, log_p0)
                 left = (pair < 0)[:, vb]
@@ -411,12 +409,9 @@ class MultiRobotFastSLAM:
             pv = pair[mi, bi]
             slots = vslots[pv]
             conf = confirmed[mi, pv]
-            pick = mi * vslots.size + pv  # rows of the flattened (M, V) pairs; np.take is
-            mu_s = np.take(mu.reshape(-1, dim), pick, axis=0)  # much faster than mu[mi, pv]
-            sig_s = np.take(sig.reshape(-1, dim * dim), pick, axis=0).reshape(-1, dim, dim)
             if motion_cov is not None:
                 poses, usable, inlier = self._sample_proposal(
-                    k, mi[conf], z[bi[conf]], r[bi[conf]], mu_s[conf], sig_s[conf], motion_cov, log_l
+                    k, mi[conf], bi[conf], z, r, rows[mi[conf], pv[conf]], motion_cov, log_l
                 )
                 if not usable:  # a lost robot's observations that cannot re-localise it
                     return 0, 0
@@ -427,20 +422,19 @@ class MultiRobotFastSLAM:
                     self.outlier_pairs += out.size
                     keep = np.ones(mi.size, bool)
                     keep[out] = False
-                    mi, bi, slots, conf, mu_s, sig_s = (a[keep] for a in (mi, bi, slots, conf, mu_s, sig_s))
-            new_mu, new_cov, d_sel, norm_sel = model.update(poses[mi], z[bi], r[bi], mu_s, sig_s)
-            count, score = store.gather(mi, slots, ("count", "score"))
-            store.write(
-                mi, slots, mean=new_mu, cov=new_cov, count=count + 1,
-                score=np.minimum(score + 1, self.config.existence.max_score),
+                    mi, bi, pv, slots, conf = (a[keep] for a in (mi, bi, pv, slots, conf))
+            read = rows[mi, pv]  # the landmarks' rows before the write (shared: in cache)
+            new_mu, new_cov, d_sel, norm_sel = model.update_rows(
+                poses, z, r, mi, bi, store.field_rows("mean"), store.field_rows("cov"), read
             )
+            store.write(mi, slots, mean=new_mu, cov=new_cov, seen=self.config.existence.max_score)
             if motion_cov is None:
                 log_l += np.bincount(mi[conf], -0.5 * (d_sel[conf] + norm_sel[conf]), m)
             if (~conf).any():
                 log_l += np.bincount(mi[~conf], log_p0[bi[~conf]], m)
             store.set_reference(slots, new_mu)
         elif motion_cov is not None:
-            poses, _, _ = self._sample_proposal(k, mi, z[:0], r[:0], z[:0], r[:0], motion_cov, log_l)
+            poses, _, _ = self._sample_proposal(k, mi, mi, z, r, mi, motion_cov, log_l)
         if self.config.existence.enabled:
             self._update_existence(poses, mean_pose, radius, mi, vslots[pair[mi, bi]] if mi.size else mi)
 
@@ -481,8 +475,8 @@ class MultiRobotFastSLAM:
         return np.concatenate([extra, cand], axis=1), np.concatenate([np.where(valid, e_extra, 0.0), e], axis=1)
 
     def _sample_proposal(
-        self, k: int, mi: np.ndarray, z: np.ndarray, r: np.ndarray, mu: np.ndarray,
-        sig: np.ndarray, motion_cov: np.ndarray, log_l: np.ndarray,
+        self, k: int, mi: np.ndarray, bi: np.ndarray, z: np.ndarray, r: np.ndarray, rows: np.ndarray,
+        motion_cov: np.ndarray, log_l: np.ndarray,
     ) -> tuple[np.ndarray, bool]:
         """FastSLAM 2.0: draw robot k's pose from the Gaussian that folds in its associated
         observations, and add the joint marginal log likelihood of those observations.
@@ -499,6 +493,13 @@ class MultiRobotFastSLAM:
         With ``association.outlier_gate`` set, pairs whose residual at the mode fails the gate
         are left out and the proposal fitted again (see :class:`AssociationConfig`).
 
+        Args:
+            k: the robot.
+            mi, bi, rows: (P,) particle, observation and landmark pool row of each pair.
+            z, r: (B, dim) observations and (B, dim, dim) covariances.
+            motion_cov: (M, 3, 3) the prior covariance P.
+            log_l: (M,) log likelihoods, added to.
+
         Returns:
             (the new poses of robot k (M, 3), also written into ``self.poses``; False when the
             observations were set aside because the robot is lost and they cannot fix its pose;
@@ -507,7 +508,7 @@ class MultiRobotFastSLAM:
         m = self.num_particles
         x_hat = self.poses[:, k].copy()
         reloc = self.config.relocalization
-        (mode, cov, ll, nis, info), terms, lam0, p_det = self._fold(x_hat, mi, z, r, mu, sig, motion_cov, 1)
+        (mode, cov, ll, nis, info), terms, lam0, p_det = self._fold(x_hat, mi, bi, z, r, rows, motion_cov, 1)
         usable = True
         inlier = np.ones(mi.size, bool)
         if mi.size:
@@ -522,7 +523,7 @@ class MultiRobotFastSLAM:
                 prior = np.broadcast_to(self._drift(k), motion_cov.shape).copy()
                 if not self.config.defer_motion_noise:  # else D already holds the unsampled noise
                     prior += motion_cov
-                (mode, cov, ll, nis, info), _, _, _ = self._fold(x_hat, mi, z, r, mu, sig, prior, reloc.iterations)
+                (mode, cov, ll, nis, info), _, _, _ = self._fold(x_hat, mi, bi, z, r, rows, prior, reloc.iterations)
                 self.relocalizations += 1
                 self._inform_drift(k, np.einsum("m,mij->ij", w, prior), np.einsum("m,mij->ij", w, info))
             elif lost:
@@ -577,15 +578,6 @@ class MultiRobotFastSLAM:
             mode = fit[0]
         return inlier, fit
 
-    def _pair_terms(
-        self, x: np.ndarray, z: np.ndarray, r: np.ndarray, mu: np.ndarray, sig: np.ndarray,
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Innovation ν = z − ẑ(x) (P, dim), Z⁻¹ and |Z| with Z = GΣGᵀ + R, and the pose
-        Jacobian Hₓ (P, dim, 3) of P pairs at the poses x (P, 3) of their particles."""
-        zhat, g = self.model.predict(x, mu)
-        zinv, zdet = sym_inv_det(g @ sig @ np.swapaxes(g, -1, -2) + r)
-        return self.model.innovation(z, zhat), zinv, zdet, self.model.pose_jacobian(x, mu)
-
     def _combine(
         self, x_hat: np.ndarray, mi: np.ndarray, terms: tuple, lam0: np.ndarray, p_det: np.ndarray,
         keep: np.ndarray | None = None,
@@ -597,10 +589,11 @@ class MultiRobotFastSLAM:
         info_p, eta_p, quad_p, norm_p = terms[:4]
         if keep is not None:
             mi, info_p, eta_p, quad_p, norm_p = (a[keep] for a in (mi, info_p, eta_p, quad_p, norm_p))
-        lam = lam0 + _sum_by(mi, info_p.reshape(-1, 9), m).reshape(m, 3, 3)
-        eta = _sum_by(mi, eta_p, m)
-        quad = np.bincount(mi, quad_p, m)
-        logdet = np.bincount(mi, norm_p, m)
+        mi = np.ascontiguousarray(mi, np.int64)
+        lam = lam0 + sum_by(mi, np.ascontiguousarray(info_p.reshape(-1, 9), float), m).reshape(m, 3, 3)
+        eta = sum_by(mi, np.ascontiguousarray(eta_p, float), m)
+        quad = sum_by(mi, np.ascontiguousarray(quad_p, float)[:, None], m)[:, 0]
+        logdet = sum_by(mi, np.ascontiguousarray(norm_p, float)[:, None], m)[:, 0]
         cov, lam_det = sym_inv_det(lam)
         cov = 0.5 * (cov + np.swapaxes(cov, -1, -2))
         shift = (cov @ eta[..., None])[..., 0]
@@ -611,12 +604,13 @@ class MultiRobotFastSLAM:
         return mode, cov, ll, nis, lam - lam0
 
     def _fold(
-        self, x_hat: np.ndarray, mi: np.ndarray, z: np.ndarray, r: np.ndarray, mu: np.ndarray,
-        sig: np.ndarray, prior_cov: np.ndarray, iterations: int,
+        self, x_hat: np.ndarray, mi: np.ndarray, bi: np.ndarray, z: np.ndarray, r: np.ndarray, rows: np.ndarray,
+        prior_cov: np.ndarray, iterations: int,
     ) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray], tuple, np.ndarray, np.ndarray]:
         """The Gaussian proposal N(mode, Λ⁻¹) of the poses (M, 3) given the prior N(x̂, P) and
-        the pairs (particle mi, z, r, landmark μ, Σ), relinearised ``iterations`` times at the
-        mode (iterated EKF: ν = z − ẑ(x_i) + Hₓ(x_i)(x_i − x̂)).
+        the pairs (particle mi, observation bi of z (B, dim) and r, landmark at pool row rows),
+        relinearised ``iterations`` times at the mode (iterated EKF: ν = z − ẑ(x_i) +
+        Hₓ(x_i)(x_i − x̂)).
 
         Returns:
             ((mode (M, 3), Λ⁻¹ (M, 3, 3), log marginal likelihood (M,), νᵀS⁻¹ν (M,),
@@ -626,17 +620,15 @@ class MultiRobotFastSLAM:
         """
         lam0, p_det = sym_inv_det(prior_cov)
         x_lin = x_hat
-        dim = self.model.dim
+        store = self.landmarks
         for it in range(iterations):
-            xl = x_lin[mi]
-            nu, zinv, zdet, hx = self._pair_terms(xl, z, r, mu, sig)
+            dx = np.zeros(x_lin.shape)
             if it:
-                dx = xl - x_hat[mi]
+                dx = x_lin - x_hat
                 dx[:, 2] = wrap_angle(dx[:, 2])
-                nu = nu + (hx @ dx[..., None])[..., 0]
-            hz = np.swapaxes(hx, -1, -2) @ zinv  # (P, 3, dim)
-            terms = (hz @ hx, (hz @ nu[..., None])[..., 0], quad_form(nu, zinv),
-                     dim * LOG_2PI + np.log(zdet), nu, zinv, hx)
+            terms = self.model.proposal_terms(
+                x_lin, dx, z, r, mi, bi, store.field_rows("mean"), store.field_rows("cov"), rows
+            )
             fit = self._combine(x_hat, mi, terms, lam0, p_det)
             x_lin = fit[0]
         return fit, terms, lam0, p_det

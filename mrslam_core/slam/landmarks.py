@@ -11,7 +11,10 @@ particle ever sees another particle's update — the no-aliasing guarantee a res
 — while a resampling step costs O(M × N / (chunk × fanout)) integers instead of copying every map
 (the array form of Montemerlo's log(N) FastSLAM tree, with two levels). Nodes and chunks are
 reference-counted and recycled through free lists, so no step scans the pool. Chunk 0 is the
-empty chunk every unwritten column names; it is never written (a write copies it first).
+empty chunk every unwritten column names; it is never written (a write copies it first). The
+per-pair work (pool rows, copy-on-write, the write itself) is compiled
+(:mod:`mrslam_core.slam.store_kernels`): a write copies a pair's shared chunk and writes its
+values in one pass, while the chunk is in cache.
 
 Per slot (shared by all particles, since the creating observation is the same): descriptor and a
 reference position (mean over the particles that hold the slot) for the search indexes
@@ -23,10 +26,15 @@ from __future__ import annotations
 import numpy as np
 
 from mrslam_core.arrays import unique_rows
+from mrslam_core.slam import store_kernels as kernels
 from mrslam_core.slam.spatial_index import DescriptorIndex, PositionGrid
 
 _FIELDS = ("mean", "cov", "exists", "count", "score")
 _EMPTY = 0  # the pool chunk every unwritten chunk column names (pinned: never freed, never written)
+
+
+#: the type each field's values are handed to the write kernel in (cast to the pool's on writing)
+_VALUE_TYPES = {"mean": np.float64, "cov": np.float64, "exists": np.bool_, "count": np.int64, "score": np.int64}
 
 
 def _width(pool: np.ndarray) -> int:
@@ -42,19 +50,28 @@ STATE_ARRAYS = ("table", "nodes", "node_ref", "refcount") + tuple(f"pool_{f}" fo
 
 
 class _FreeList:
-    """A stack of free ids (nodes or pool chunks)."""
+    """A stack of free ids (nodes or pool chunks): ``ids[:top]``, the top last."""
 
     def __init__(self) -> None:
-        self.ids = np.zeros(0, np.int64)
+        self.buf = np.zeros(0, np.int64)
+        self.top = 0
+
+    @property
+    def ids(self) -> np.ndarray:
+        return self.buf[: self.top]
 
     def push(self, ids: np.ndarray) -> None:
         if ids.size:
-            self.ids = np.concatenate([self.ids, ids.astype(np.int64)])
+            if self.top + ids.size > self.buf.size:
+                grown = np.zeros(max(self.top + ids.size, 2 * self.buf.size), np.int64)
+                grown[: self.top] = self.buf[: self.top]
+                self.buf = grown
+            self.buf[self.top : self.top + ids.size] = ids
+            self.top += ids.size
 
     def pop(self, n: int) -> np.ndarray:
-        out = self.ids[self.ids.size - n:]
-        self.ids = self.ids[: self.ids.size - n]
-        return out
+        self.top -= n
+        return self.buf[self.top : self.top + n].copy()
 
 
 class LandmarkStore:
@@ -157,14 +174,18 @@ class LandmarkStore:
         self.node_ref = np.concatenate([self.node_ref, np.zeros(new - have, np.int64)])
         self._free_nodes.push(np.arange(new - 1, have - 1, -1))
 
-    def _take_chunks(self, n: int) -> np.ndarray:
-        if self._free_chunks.ids.size < n:
-            self._grow_pool(self.refcount.size + n - self._free_chunks.ids.size)
-        return self._free_chunks.pop(n)
+    def _reserve_chunks(self, n: int) -> None:
+        """Grow the pool so that ``n`` chunks are free."""
+        if self._free_chunks.top < n:
+            self._grow_pool(self.refcount.size + n - self._free_chunks.top)
+
+    def _reserve_nodes(self, n: int) -> None:
+        """Grow the nodes so that ``n`` are free."""
+        if self._free_nodes.top < n:
+            self._grow_nodes(self.node_ref.size + n - self._free_nodes.top)
 
     def _take_nodes(self, n: int) -> np.ndarray:
-        if self._free_nodes.ids.size < n:
-            self._grow_nodes(self.node_ref.size + n - self._free_nodes.ids.size)
+        self._reserve_nodes(n)
         return self._free_nodes.pop(n)
 
     def _release_chunks(self, cid: np.ndarray) -> None:
@@ -175,65 +196,19 @@ class LandmarkStore:
         self.refcount -= n
         self._free_chunks.push(np.flatnonzero((n > 0) & (self.refcount == 0)))
 
-    def _release_nodes(self, nid: np.ndarray) -> None:
-        """Drop one table reference to each entry of ``nid`` (repeats allowed); a node left with
-        none is freed and releases its chunks."""
-        if nid.size == 0:
-            return
-        n = np.bincount(nid, minlength=self.node_ref.size)
-        self.node_ref -= n
-        dead = np.flatnonzero((n > 0) & (self.node_ref == 0))
+    def _free_dead_nodes(self, dead: np.ndarray) -> None:
+        """Free the nodes ``dead`` (no table entry names them any more; any order) and drop their
+        references to their chunks."""
         if dead.size:
+            dead = np.sort(dead)
             self._free_nodes.push(dead)
             self._release_chunks(self.nodes[dead].ravel())
 
-    def _distinct(self, key: np.ndarray, space: int) -> np.ndarray:
-        """Positions (sorted) of one occurrence of each distinct value of ``key`` (ints in
-        [0, space)), in O(len(key)) with a scratch array instead of a sort."""
+    def _scratch_for(self, space: int) -> np.ndarray:
+        """A scratch array of at least ``space`` entries, all −1 (the kernels leave it so)."""
         if self._scratch.size < space:
             self._scratch = np.full(max(space, 2 * self._scratch.size), -1, np.int64)
-        pos = np.arange(key.size)
-        self._scratch[key] = pos  # one position per value survives
-        first = pos[self._scratch[key] == pos]
-        self._scratch[key] = -1
-        return first
-
-    def _private_nodes(self, m: np.ndarray, g: np.ndarray) -> np.ndarray:
-        """Give particles ``m`` their own copy of node columns ``g`` where they share it; returns
-        the (private) node of each pair."""
-        nid = self.table[m, g]
-        shared = self.node_ref[nid] > 1
-        if not shared.any():
-            return nid
-        ms, gs = m[shared], g[shared]
-        one = self._distinct(ms * self.table.shape[1] + gs, self.table.size)
-        ms, gs, old = ms[one], gs[one], nid[shared][one]
-        new = self._take_nodes(old.size)
-        self.nodes[new] = self.nodes[old]
-        self.node_ref[new] = 1
-        self.table[ms, gs] = new
-        self.refcount += np.bincount(self.nodes[new].ravel(), minlength=self.refcount.size)
-        self._release_nodes(old)  # still referenced elsewhere: nothing is freed
-        return self.table[m, g]
-
-    def _private_chunks(self, nid: np.ndarray, sub: np.ndarray) -> np.ndarray:
-        """Give private nodes ``nid`` their own copy of chunk columns ``sub`` where they share it;
-        returns the (private) pool chunk of each pair."""
-        cid = self.nodes[nid, sub]
-        shared = self.refcount[cid] > 1
-        if not shared.any():
-            return cid
-        ns, ss = nid[shared], sub[shared]
-        one = self._distinct(ns * self.fanout + ss, self.nodes.size)
-        ns, ss, old = ns[one], ss[one], cid[shared][one]
-        new = self._take_chunks(old.size)
-        for f in _FIELDS:
-            arr = getattr(self, f"pool_{f}")
-            arr[new] = np.take(arr, old, axis=0)
-        self.nodes[ns, ss] = new
-        self.refcount[new] = 1
-        self._release_chunks(old)
-        return self.nodes[nid, sub]
+        return self._scratch
 
     def chunk_table(self) -> np.ndarray:
         """(M, columns) pool chunk of each particle's chunk column (a new array)."""
@@ -279,10 +254,27 @@ class LandmarkStore:
             self.descriptor[slots] = descriptors
         return slots
 
-    def _flat(self, m: np.ndarray, slots: np.ndarray) -> np.ndarray:
-        """Row of (particle, slot) pairs in the pools' (P·chunk, ...) views."""
-        col = slots // self.chunk
-        return self.nodes[self.table[m, col // self.fanout], col % self.fanout] * self.chunk + slots % self.chunk
+    def rows(self, m: np.ndarray, slots: np.ndarray) -> np.ndarray:
+        """Rows in the pools' (P·chunk, ...) views of the pairs (particles ``m``, ``slots``), index
+        arrays that broadcast together; (M, V) for ``m`` = arange(M)[:, None], ``slots`` (1, V)."""
+        m, slots = np.asarray(m, np.int64), np.asarray(slots, np.int64)
+        if m.shape == (self.num_particles, 1) and slots.ndim == 2 and slots.shape[0] == 1 and (
+            np.array_equal(m[:, 0], np.arange(m.shape[0]))
+        ):
+            out = np.empty((m.shape[0], slots.shape[1]), np.int64)
+            cols, which = np.unique(slots[0] // self.chunk, return_inverse=True)
+            kernels.pool_rows_outer(self.table, self.nodes, self.chunk, self.fanout, cols, which.ravel(),
+                                    slots[0] % self.chunk, out)
+            return out
+        m, slots = np.broadcast_arrays(m, slots)
+        out = np.empty(m.shape, np.int64)
+        kernels.pool_rows(self.table, self.nodes, self.chunk, self.fanout, m.ravel(), slots.ravel(), out.reshape(-1))
+        return out
+
+    def field_rows(self, name: str) -> np.ndarray:
+        """The pool of field ``name`` as rows (P·chunk, values per slot), a view."""
+        arr = getattr(self, f"pool_{name}")
+        return arr.reshape(arr.shape[0] * arr.shape[1], _width(arr))
 
     def gather(self, m: np.ndarray, slots: np.ndarray, fields=("mean", "cov", "exists", "count")):
         """Values of particles ``m`` at ``slots`` (index arrays that broadcast together).
@@ -291,27 +283,75 @@ class LandmarkStore:
             a tuple of copies, one per name in ``fields`` (default: mean (..., dim),
             cov (..., dim, dim), exists (...), count (...)).
         """
-        flat = self._flat(m, slots)
+        return self.gather_rows(self.rows(m, slots), fields)
+
+    def gather_rows(self, rows: np.ndarray, fields=("mean", "cov", "exists", "count")):
+        """Values at pool ``rows`` (see :meth:`rows`), one copy per name in ``fields``."""
         out = []
         for f in fields:
             arr = getattr(self, f"pool_{f}")
             # np.take on rows of a 2-D view: several times faster than fancy indexing of a 4-D pool
-            rows = np.take(arr.reshape(arr.shape[0] * arr.shape[1], _width(arr)), flat, axis=0)
-            out.append(rows.reshape(flat.shape + arr.shape[2:]))
+            out.append(np.take(self.field_rows(f), rows, axis=0).reshape(rows.shape + arr.shape[2:]))
         return tuple(out)
 
-    def write(self, m: np.ndarray, slots: np.ndarray, **values: np.ndarray) -> None:
-        """Set fields (mean, cov, exists, count, score) of particles ``m`` (P,) at ``slots`` (P,).
+    def write(self, m: np.ndarray, slots: np.ndarray, seen: int | None = None, **values: np.ndarray) -> np.ndarray:
+        """Set fields (mean, cov, exists, count, score) of particles ``m`` (P,) at ``slots`` (P,);
+        each value one per pair or one for all. With ``seen`` (a maximum score) the pairs were
+        observed once more (their EKF update): count + 1 and existence score + 1 up to ``seen``.
 
-        Pairs must be unique. Shared nodes and chunks are copied first, so only these particles change.
+        Pairs must be unique. Shared nodes and chunks are copied first (copy-on-write), so only
+        these particles change: the nodes by :func:`~.store_kernels.copy_nodes`, the chunks in the
+        same pass that writes the values (:func:`~.store_kernels.write_pairs`).
+
+        Returns:
+            (P,) the pairs' pool rows after the write (see :meth:`rows`).
         """
+        unknown = set(values) - set(_FIELDS)
+        if unknown:
+            raise ValueError(f"unknown landmark fields {sorted(unknown)}")
+        m = np.ascontiguousarray(m, np.int64).ravel()
+        slots = np.ascontiguousarray(slots, np.int64).ravel()
         col = slots // self.chunk
-        nid = self._private_nodes(m, col // self.fanout)
-        flat = self._private_chunks(nid, col % self.fanout) * self.chunk + slots % self.chunk
-        for name, value in values.items():
-            arr = getattr(self, f"pool_{name}")
-            rows = arr.reshape(arr.shape[0] * arr.shape[1], _width(arr))
-            rows[flat] = np.reshape(np.broadcast_to(value, flat.shape + arr.shape[2:]), (flat.size, rows.shape[1]))
+        g, sub = col // self.fanout, col % self.fanout
+        pick = np.empty(m.size, bool)
+        need = kernels.shared_nodes(self.table, self.node_ref, m, g, self._scratch_for(self.table.size), pick)
+        nid = np.empty(m.size, np.int64)
+        if need:
+            self._reserve_nodes(need)
+            fl = self._free_nodes
+            fl.top, dead = kernels.copy_nodes(
+                self.table, self.nodes, self.node_ref, self.refcount, m, g, pick, fl.buf, fl.top, nid
+            )
+            self._free_dead_nodes(dead)
+        else:
+            nid = self.table[m, g]
+        target = np.empty(m.size, np.int64)
+        need = kernels.plan_chunks(self.nodes, self.refcount, nid, sub, self._scratch_for(self.nodes.size), target)
+        self._reserve_chunks(need)
+        fl = self._free_chunks
+        fl.top -= need
+        rows = np.empty(m.size, np.int64)
+        freed = kernels.write_pairs(
+            self.nodes, self.refcount,
+            *(getattr(self, f"pool_{f}").reshape(self.refcount.size, -1) for f in _FIELDS),
+            nid, sub, slots % self.chunk, target, fl.buf, fl.top,
+            *(self._values(f, values.get(f), m.size) for f in _FIELDS), seen is not None, int(seen or 0), rows,
+        )
+        self._free_chunks.push(np.sort(freed))
+        return rows
+
+    def _values(self, name: str, value, n: int) -> np.ndarray:
+        """A value for :meth:`write` as the kernel takes it: (n or 1, width) for mean and cov,
+        (n or 1,) for the others; (0, ...) when the field is not written."""
+        per_slot = getattr(self, f"pool_{name}").shape[2:]
+        shape = (-1, int(np.prod(per_slot, dtype=np.int64))) if per_slot else (-1,)
+        dtype = _VALUE_TYPES[name]
+        if value is None:
+            return np.zeros((0,) + shape[1:], dtype)
+        value = np.asarray(value, dtype)
+        if value.shape == per_slot:  # one for all
+            return np.ascontiguousarray(value.reshape((1,) + shape[1:]))
+        return np.ascontiguousarray(np.broadcast_to(value, (n,) + per_slot).reshape(shape))
 
     def exists_dense(self) -> np.ndarray:
         """(M, size) bool: which particle holds which slot."""
@@ -323,14 +363,8 @@ class LandmarkStore:
         each particle's map (particles share most of their chunks)."""
         if self.size == 0:
             return np.zeros(0, bool)
-        g = np.broadcast_to(np.arange(self.table.shape[1]), self.table.shape).ravel()
-        key = np.unique(g * self.node_ref.size + self.table.ravel())  # distinct (column, node)
-        g, nid = key // self.node_ref.size, key % self.node_ref.size
-        col = (g[:, None] * self.fanout + np.arange(self.fanout)).ravel()
-        key = np.unique(col * self.refcount.size + self.nodes[nid].ravel())  # distinct (column, chunk)
-        col, cid = key // self.refcount.size, key % self.refcount.size
         out = np.zeros((self.table.shape[1] * self.fanout, self.chunk), bool)
-        np.logical_or.at(out, col, self.pool_exists[cid])
+        kernels.held_slots(self.table, self.nodes, self.pool_exists, out)
         return out.ravel()[: self.size]
 
     def refresh_reference(self, slots: np.ndarray) -> None:
@@ -354,12 +388,11 @@ class LandmarkStore:
         over the pairs that name it (``slots`` (P,)). Cheaper than :meth:`refresh_reference`."""
         if slots.size == 0:
             return
-        lo = int(slots.min())  # bincounts over the slot range: no sort (np.unique) needed
-        rel = slots - lo
-        n = np.bincount(rel)
+        lo = int(slots.min())  # sums over the slot range: no sort (np.unique) needed
+        n, total = kernels.slot_sums(np.ascontiguousarray(slots, np.int64), np.ascontiguousarray(means, float),
+                                     lo, int(slots.max()) - lo + 1)
         uniq = np.flatnonzero(n)
-        ref = np.stack([np.bincount(rel, means[:, d], n.size)[uniq] for d in range(self.dim)], -1)
-        self._set_ref(uniq + lo, ref / n[uniq, None])
+        self._set_ref(uniq + lo, total[uniq] / n[uniq, None])
 
     def _set_ref(self, slots: np.ndarray, ref: np.ndarray) -> None:
         born = slots[~np.isfinite(self.ref[slots, 0]) & np.isfinite(ref[:, 0])]
@@ -419,10 +452,8 @@ class LandmarkStore:
         """
         if dst.size == 0:
             return
-        old = self.table[dst].ravel()
-        self.table[dst] = self.table[src]
-        self.node_ref += np.bincount(self.table[dst].ravel(), minlength=self.node_ref.size)
-        self._release_nodes(old)
+        dst = np.ascontiguousarray(dst, np.int64)
+        self._free_dead_nodes(kernels.copy_table_rows(self.table, self.node_ref, dst, self.table[src]))
 
     def dead_fraction(self) -> float:
         """Share of the used slots that no particle holds any more."""

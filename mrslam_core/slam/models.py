@@ -11,7 +11,8 @@ from __future__ import annotations
 import numpy as np
 
 from mrslam_core.geometry.se2 import wrap_angle
-from mrslam_core.linalg import quad_form, rotate_z_sym3, sym3_inv_quad_det, sym_inv_det
+from mrslam_core.linalg import quad_form, sym_inv_det
+from mrslam_core.slam import stereo_kernels
 
 LOG_2PI = float(np.log(2.0 * np.pi))
 
@@ -73,6 +74,61 @@ class ObservationModel:
         nu = self.innovation(z, zhat)
         return quad_form(nu, zinv), self.dim * LOG_2PI + np.log(zdet)
 
+    def score_rows(self, pose, z, r, mean, cov, rows, index, pose_cov=None, with_norm=True):
+        """:meth:`score` of every particle's candidate pairs, the landmarks read from pool rows.
+
+        Args:
+            pose: (M, 3) poses; z: (B, dim) and r: (B, dim, dim) observations; mean: (R, dim)
+                and cov: (R, dim·dim) landmark values by row (the store's pools); rows: (M, V)
+                row of particle m's pair v; index: (V,) observation of pair v; pose_cov:
+                (M, 3, 3) or None, as in :meth:`score`.
+            with_norm: also return log det(2πZ) (else None).
+
+        Returns:
+            (D (M, V), log det(2πZ) (M, V) or None).
+        """
+        dim = self.dim
+        mu = np.take(mean, rows, axis=0)
+        sig = np.take(cov, rows, axis=0).reshape(rows.shape + (dim, dim))
+        pc = None if pose_cov is None else pose_cov[:, None]
+        return self.score(pose[:, None], z[None], r[None], mu, sig, pc, index)
+
+    def update_rows(self, pose, z, r, pi, bi, mean, cov, rows):
+        """:meth:`update` of P pairs: particle ``pi`` (P,) of ``pose`` (M, 3), observation ``bi``
+        (P,) of ``z`` (B, dim) and ``r`` (B, dim, dim), the landmark at pool ``rows`` (P,) of
+        ``mean`` (R, dim) and ``cov`` (R, dim·dim) (the store's pools).
+
+        Returns:
+            as :meth:`update`.
+        """
+        dim = self.dim
+        mu = np.take(mean, rows, axis=0)
+        sig = np.take(cov, rows, axis=0).reshape(-1, dim, dim)
+        return self.update(pose[pi], z[bi], r[bi], mu, sig)
+
+    def proposal_terms(self, x, dx, z, r, pi, bi, mean, cov, rows):
+        """Per-pair terms of the FastSLAM 2.0 proposal linearised at the poses x (M, 3), for P
+        pairs: particle ``pi`` (P,), observation ``bi`` (P,) of z (B, dim) and r (B, dim, dim),
+        landmark at pool ``rows`` (P,) of ``mean`` (R, dim) and ``cov`` (R, dim·dim). With Hₓ,
+        Z = GΣGᵀ + R and ν = z − ẑ(x) + Hₓ dx (dx (M, 3): the iterated EKF's shift x − x̂).
+
+        Returns:
+            (HₓᵀZ⁻¹Hₓ (P, 3, 3), HₓᵀZ⁻¹ν (P, 3), νᵀZ⁻¹ν (P,), dim·log 2π + log|Z| (P,),
+            ν (P, dim), Z⁻¹ (P, dim, dim), Hₓ (P, dim, 3)); ν, Z and Hₓ in any frame the model
+            chooses, the same for all three.
+        """
+        dim = self.dim
+        mu = np.take(mean, rows, axis=0)
+        sig = np.take(cov, rows, axis=0).reshape(-1, dim, dim)
+        x, dx, z, r = x[pi], dx[pi], z[bi], r[bi]
+        zhat, g = self.predict(x, mu)
+        zinv, zdet = sym_inv_det(g @ sig @ _t(g) + r)
+        hx = self.pose_jacobian(x, mu)
+        nu = self.innovation(z, zhat) + (hx @ dx[..., None])[..., 0]
+        hz = _t(hx) @ zinv  # (P, 3, dim)
+        return (hz @ hx, (hz @ nu[..., None])[..., 0], quad_form(nu, zinv), self.dim * LOG_2PI + np.log(zdet),
+                nu, zinv, hx)
+
     def update(self, pose, z, r, mu, sig):
         """EKF update (eqs. 6–11, Joseph form) of P chosen landmark/observation pairs.
 
@@ -129,7 +185,16 @@ class StereoPointModel(ObservationModel):
         return lm, self._rot(np.broadcast_to(pose[..., 2], lm.shape[:-1]))
 
     def new_landmark(self, pose, z, r):
-        return self.to_map(pose, z), rotate_z_sym3(r, pose[..., 2])
+        """g⁻¹(x, z) and Rz R Rzᵀ from :func:`~mrslam_core.slam.stereo_kernels.observation_terms`
+        (the terms the gate uses), each pair its own particle with one observation."""
+        lead = np.broadcast_shapes(pose.shape[:-1], z.shape[:-1], r.shape[:-2])
+        pose = np.ascontiguousarray(np.broadcast_to(pose, lead + (3,)).reshape(-1, 3), float)
+        n = pose.shape[0]
+        z = np.ascontiguousarray(np.broadcast_to(z, lead + (3,)).reshape(n, 1, 3), float)
+        r = np.ascontiguousarray(np.broadcast_to(r, lead + (3, 3)).reshape(n, 1, 3, 3), float)
+        lm, rn = np.empty((n, 1, 3)), np.empty((n, 1, 6))
+        stereo_kernels.observation_terms(pose, np.cos(pose[:, 2]), np.sin(pose[:, 2]), z, r, lm, rn)
+        return lm.reshape(lead + (3,)), rn[:, 0, [0, 1, 2, 1, 3, 4, 2, 4, 5]].reshape(lead + (3, 3))
 
     def pose_jacobian(self, pose: np.ndarray, landmark: np.ndarray) -> np.ndarray:
         zhat, _ = self.predict(pose, landmark)
@@ -144,92 +209,92 @@ class StereoPointModel(ObservationModel):
         return jac
 
     def score(self, pose, z, r, mu, sig, pose_cov=None, index=None):
-        if pose_cov is not None:
-            return super().score(pose, z, r, mu, sig, pose_cov, index)
-        # the observation in the map and its covariance there depend on (particle, observation)
-        # only: compute them for (M, B) and spread them over the V candidate pairs
-        # S = Σ + Rz R Rzᵀ is assembled from its 6 distinct terms, each (..., V): no stacks of
-        # 3×3 matrices are built for the V pairs (the largest arrays of a filter step)
-        lm = self.to_map(pose, z)
-        c, s = np.cos(pose[..., 2]), np.sin(pose[..., 2])
         if index is not None:
-            lm, r = lm[..., index, :], r[..., index, :, :]
-            if np.ndim(c) and c.shape[-1] != 1:  # else one angle per particle, broadcast
-                c, s = c[..., index], s[..., index]
-        rxx, rxy, rxz = r[..., 0, 0], r[..., 0, 1], r[..., 0, 2]
-        ryy, ryz = r[..., 1, 1], r[..., 1, 2]
-        cc, ss, cs = c * c, s * s, c * s
-        p = sig[..., 0, 0] + (cc * rxx - 2 * cs * rxy + ss * ryy)
-        d = sig[..., 1, 1] + (ss * rxx + 2 * cs * rxy + cc * ryy)
-        q = sig[..., 0, 1] + (cs * (rxx - ryy) + (cc - ss) * rxy)
-        sx = sig[..., 0, 2] + (c * rxz - s * ryz)
-        e = sig[..., 1, 2] + (s * rxz + c * ryz)
-        f = sig[..., 2, 2] + r[..., 2, 2]
-        x, y, zz = (lm[..., i] - mu[..., i] for i in range(3))
-        m2, det = sym3_inv_quad_det(p, q, sx, d, e, f, x, y, zz)
+            z, r = z[..., index, :], r[..., index, :, :]
+        shapes = [pose.shape[:-1], z.shape[:-1], r.shape[:-2], mu.shape[:-1], sig.shape[:-2]]
+        if pose_cov is not None:
+            shapes.append(pose_cov.shape[:-2])
+        lead = np.broadcast_shapes(*shapes)
+        n = int(np.prod(lead, dtype=np.int64))
+        pose, z, mu = (np.broadcast_to(a, lead + (3,)).reshape(n, 3) for a in (pose, z, mu))
+        r, sig = (np.broadcast_to(a, lead + (3, 3)).reshape(n, 3, 3) for a in (r, sig))
+        if pose_cov is not None:
+            pose_cov = np.broadcast_to(pose_cov, lead + (3, 3)).reshape(n, 3, 3)
+        # every pair its own particle with one observation and one candidate
+        maha, norm = self.score_rows(pose, z[:, None], r[:, None], mu, sig.reshape(n, 9), np.arange(n)[:, None],
+                                     np.zeros(1, np.int64), pose_cov, per_particle=True)
+        return maha.reshape(lead), norm.reshape(lead)
+
+    def score_rows(self, pose, z, r, mean, cov, rows, index, pose_cov=None, with_norm=True, per_particle=False):
+        """The gate in one pass over the pools (:func:`~mrslam_core.slam.stereo_kernels.gate`):
+        the observations in the map frame and Rz R Rzᵀ per (particle, observation), then per
+        pair S = Σ + Rz R Rzᵀ [+ J P Jᵀ], D and det S from the six distinct terms of S. With
+        ``per_particle``, z (M, B, 3) and r (M, B, 3, 3) are each particle's own."""
+        m = pose.shape[0]
+        pose = np.ascontiguousarray(pose, float)
+        zz = np.ascontiguousarray(z if per_particle else z[None], float)
+        lm, rn = np.empty((m, zz.shape[1], 3)), np.empty((m, zz.shape[1], 6))
+        stereo_kernels.observation_terms(
+            pose, np.cos(pose[:, 2]), np.sin(pose[:, 2]), zz,
+            np.ascontiguousarray(r if per_particle else r[None], float), lm, rn,
+        )
+        pc = np.zeros((0, 6))
+        if pose_cov is not None:
+            pc = np.ascontiguousarray(pose_cov.reshape(m, 9)[:, [0, 1, 2, 4, 5, 8]], float)
+        maha = np.empty(rows.shape)
+        det = np.empty(rows.shape)
+        stereo_kernels.gate(lm, rn, pose, pc, mean, cov,
+                            np.ascontiguousarray(rows, np.int64), np.ascontiguousarray(index, np.int64), maha, det)
+        if not with_norm:
+            return maha, None
         with np.errstate(divide="ignore", invalid="ignore"):
-            return m2, 3 * LOG_2PI + np.log(det)
+            return maha, 3 * LOG_2PI + np.log(det)
 
     def update(self, pose, z, r, mu, sig):
         """The Kalman step with H = I in the map frame (see the class docstring), written out on
-        the distinct terms of the symmetric matrices: S = Σ + Rz R Rzᵀ, A = S⁻¹ (cofactors),
-        T = Σ A, μ' = μ + T ν, Σ' = Σ − T Σ with ν = g⁻¹(x, z) − μ. Same result as
-        :func:`~mrslam_core.linalg.sym3_kalman`, without building (P, 3, 3) stacks for
-        Rz R Rzᵀ, S and T (13 % less time per filter step in ``mrslam bench filter``)."""
+        the distinct terms of the symmetric matrices (:func:`~mrslam_core.slam.stereo_kernels.kalman`):
+        S = Σ + Rz R Rzᵀ, A = S⁻¹ (cofactors), T = Σ A, μ' = μ + T ν, Σ' = Σ − T Σ with
+        ν = g⁻¹(x, z) − μ."""
         lead = np.broadcast_shapes(pose.shape[:-1], z.shape[:-1], mu.shape[:-1], sig.shape[:-2], r.shape[:-2])
         pose, z, mu = (np.broadcast_to(a, lead + (3,)).reshape(-1, 3) for a in (pose, z, mu))
         sig, r = (np.broadcast_to(a, lead + (3, 3)).reshape(-1, 3, 3) for a in (sig, r))
-        c, s = np.cos(pose[:, 2]), np.sin(pose[:, 2])
-        s00, s01, s02 = sig[:, 0, 0].astype(float), sig[:, 0, 1].astype(float), sig[:, 0, 2].astype(float)
-        s11, s12, s22 = sig[:, 1, 1].astype(float), sig[:, 1, 2].astype(float), sig[:, 2, 2].astype(float)
-        rxx, rxy, rxz, ryy, ryz, rzz = r[:, 0, 0], r[:, 0, 1], r[:, 0, 2], r[:, 1, 1], r[:, 1, 2], r[:, 2, 2]
-        zx, zy = z[:, 0], z[:, 1]
-        mx, my, mz = mu[:, 0].astype(float), mu[:, 1].astype(float), mu[:, 2].astype(float)
-        x = pose[:, 0] + c * zx - s * zy - mx  # ν
-        y = pose[:, 1] + s * zx + c * zy - my
-        zz = z[:, 2] - mz
-        cc, ss, cs = c * c, s * s, c * s
-        p = s00 + (cc * rxx - 2 * cs * rxy + ss * ryy)
-        d = s11 + (ss * rxx + 2 * cs * rxy + cc * ryy)
-        q = s01 + (cs * (rxx - ryy) + (cc - ss) * rxy)
-        sx = s02 + (c * rxz - s * ryz)
-        e = s12 + (s * rxz + c * ryz)
-        f = s22 + rzz
-        c00 = d * f - e * e
-        c01 = sx * e - q * f
-        c02 = q * e - sx * d
-        c11 = p * f - sx * sx
-        c12 = q * sx - p * e
-        c22 = p * d - q * q
-        det = p * c00 + q * c01 + sx * c02
-        with np.errstate(divide="ignore", invalid="ignore"):
-            inv = 1.0 / det
-        a00, a01, a02, a11, a12, a22 = (v * inv for v in (c00, c01, c02, c11, c12, c22))
-        t00 = s00 * a00 + s01 * a01 + s02 * a02
-        t01 = s00 * a01 + s01 * a11 + s02 * a12
-        t02 = s00 * a02 + s01 * a12 + s02 * a22
-        t10 = s01 * a00 + s11 * a01 + s12 * a02
-        t11 = s01 * a01 + s11 * a11 + s12 * a12
-        t12 = s01 * a02 + s11 * a12 + s12 * a22
-        t20 = s02 * a00 + s12 * a01 + s22 * a02
-        t21 = s02 * a01 + s12 * a11 + s22 * a12
-        t22 = s02 * a02 + s12 * a12 + s22 * a22
-        new_mu = np.empty(pose.shape)
-        new_mu[:, 0] = mx + t00 * x + t01 * y + t02 * zz
-        new_mu[:, 1] = my + t10 * x + t11 * y + t12 * zz
-        new_mu[:, 2] = mz + t20 * x + t21 * y + t22 * zz
-        new_sig = np.empty(new_mu.shape + (3,))
-        new_sig[..., 0, 0] = s00 - (t00 * s00 + t01 * s01 + t02 * s02)
-        new_sig[..., 1, 1] = s11 - (t10 * s01 + t11 * s11 + t12 * s12)
-        new_sig[..., 2, 2] = s22 - (t20 * s02 + t21 * s12 + t22 * s22)
-        new_sig[..., 0, 1] = new_sig[..., 1, 0] = s01 - (t00 * s01 + t01 * s11 + t02 * s12)
-        new_sig[..., 0, 2] = new_sig[..., 2, 0] = s02 - (t00 * s02 + t01 * s12 + t02 * s22)
-        new_sig[..., 1, 2] = new_sig[..., 2, 1] = s12 - (t10 * s02 + t11 * s12 + t12 * s22)
-        maha = a00 * x * x + a11 * y * y + a22 * zz * zz + 2.0 * (a01 * x * y + a02 * x * zz + a12 * y * zz)
-        return (
-            new_mu.reshape(lead + (3,)), new_sig.reshape(lead + (3, 3)), maha.reshape(lead),
-            3 * LOG_2PI + np.log(det).reshape(lead),
+        n = pose.shape[0]
+        pairs = np.arange(n)
+        new_mu, new_sig, maha, norm = self.update_rows(
+            pose, z, r, pairs, pairs, np.ascontiguousarray(mu), np.ascontiguousarray(sig).reshape(n, 9), pairs
         )
+        return new_mu.reshape(lead + (3,)), new_sig.reshape(lead + (3, 3)), maha.reshape(lead), norm.reshape(lead)
+
+    def update_rows(self, pose, z, r, pi, bi, mean, cov, rows):
+        """:meth:`update` of P pairs indexed into per-particle poses and per-observation z and r,
+        the landmarks read from pool ``rows`` (no gathered copies; see the base class)."""
+        pose = np.ascontiguousarray(pose, float)
+        n = rows.size
+        new_mu, new_sig, maha, det = np.empty((n, 3)), np.empty((n, 9)), np.empty(n), np.empty(n)
+        stereo_kernels.kalman(
+            pose, np.cos(pose[:, 2]), np.sin(pose[:, 2]), np.ascontiguousarray(z, float),
+            np.ascontiguousarray(r, float), np.ascontiguousarray(pi, np.int64), np.ascontiguousarray(bi, np.int64),
+            mean, cov, np.ascontiguousarray(rows, np.int64), new_mu, new_sig, maha, det,
+        )
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return new_mu, new_sig.reshape(n, 3, 3), maha, 3 * LOG_2PI + np.log(det)
+
+    def proposal_terms(self, x, dx, z, r, pi, bi, mean, cov, rows):
+        """In the map frame (:func:`~mrslam_core.slam.stereo_kernels.proposal_terms`): ν, Z and Hₓ
+        rotated by Rz(θ), which leaves HₓᵀZ⁻¹Hₓ, HₓᵀZ⁻¹ν, νᵀZ⁻¹ν and |Z| unchanged."""
+        x = np.ascontiguousarray(x, float)
+        n = rows.size
+        info, zinv, hx = np.empty((n, 3, 3)), np.empty((n, 3, 3)), np.empty((n, 3, 3))
+        eta, nu = np.empty((n, 3)), np.empty((n, 3))
+        quad, det = np.empty(n), np.empty(n)
+        stereo_kernels.proposal_terms(
+            x, np.ascontiguousarray(dx, float), np.cos(x[:, 2]), np.sin(x[:, 2]), np.ascontiguousarray(z, float),
+            np.ascontiguousarray(r, float), np.ascontiguousarray(pi, np.int64), np.ascontiguousarray(bi, np.int64),
+            mean, cov, np.ascontiguousarray(rows, np.int64), info, eta, quad, det, nu, zinv, hx,
+        )
+        with np.errstate(divide="ignore", invalid="ignore"):
+            norm = 3 * LOG_2PI + np.log(det)
+        return info, eta, quad, norm, nu, zinv, hx
 
     @staticmethod
     def _rot(theta: np.ndarray) -> np.ndarray:

@@ -1,0 +1,230 @@
+"""Compiled kernels of the stereo point model (:class:`~mrslam_core.slam.models.StereoPointModel`):
+the χ² gate over candidate pairs, the EKF update of chosen pairs, and the per-pair terms of the
+FastSLAM 2.0 proposal.
+
+All work in the map frame with H = I (see the model's docstring): S = Σ + Rz R Rzᵀ (+ J P Jᵀ for
+a pose uncertain by P, J = ∂(g⁻¹(x, z) − μ)/∂x restricted to its non-zero rows), innovation
+ν = g⁻¹(x, z) − μ. Every 3×3 symmetric matrix is carried as its six distinct terms, in the order
+(xx, xy, xz, yy, yz, zz). The arithmetic follows the numpy code these kernels replaced term by
+term (same operations in the same order, no fused multiply-add), so FastSLAM 1.0 results are
+bit for bit those of the numpy version. Transcendentals (cos, sin, log) stay in numpy, outside.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True)
+def observation_terms(pose, c, s, z, r, lm, rn):
+    """What the gate needs per particle and observation: the observation in the map frame
+    g⁻¹(x, z) and the distinct terms of Rz(θ) R Rz(θ)ᵀ.
+
+    Args:
+        pose: (M, 3) poses; c, s: (M,) cos θ and sin θ.
+        z: (1, B, 3) observations and r: (1, B, 3, 3) their covariances (base_link) [m, m²], or
+            (M, B, ...): each particle's own.
+        lm: (M, B, 3) and rn: (M, B, 6) outputs, map frame.
+    """
+    for p in range(c.size):
+        cc, ss, cs = c[p] * c[p], s[p] * s[p], c[p] * s[p]
+        pr = p if r.shape[0] > 1 else 0
+        pz = p if z.shape[0] > 1 else 0
+        for b in range(r.shape[1]):
+            zx, zy = z[pz, b, 0], z[pz, b, 1]
+            lm[p, b, 0] = pose[p, 0] + c[p] * zx - s[p] * zy
+            lm[p, b, 1] = pose[p, 1] + s[p] * zx + c[p] * zy
+            lm[p, b, 2] = z[pz, b, 2]
+            rxx, rxy, rxz = r[pr, b, 0, 0], r[pr, b, 0, 1], r[pr, b, 0, 2]
+            ryy, ryz = r[pr, b, 1, 1], r[pr, b, 1, 2]
+            rn[p, b, 0] = cc * rxx - 2 * cs * rxy + ss * ryy
+            rn[p, b, 1] = cs * (rxx - ryy) + (cc - ss) * rxy
+            rn[p, b, 2] = c[p] * rxz - s[p] * ryz
+            rn[p, b, 3] = ss * rxx + 2 * cs * rxy + cc * ryy
+            rn[p, b, 4] = s[p] * rxz + c[p] * ryz
+            rn[p, b, 5] = r[pr, b, 2, 2]
+
+
+@njit(cache=True)
+def gate(lm, rn, pose, pose_cov, mean, cov, rows, vb, maha, det):
+    """Mahalanobis distance νᵀS⁻¹ν and det S of every particle's candidate pairs, read straight
+    from the landmark pools (no gathered copies).
+
+    Args:
+        lm: (M, B, 3) each observation in the map frame, per particle [m].
+        rn: (M, B, 6) Rz R Rzᵀ terms (:func:`observation_terms`).
+        pose: (M, 3) poses; read only with ``pose_cov``.
+        pose_cov: (M, 6) terms of each pose's covariance P (FastSLAM 2.0 prediction), or (0, 6):
+            none (FastSLAM 1.0).
+        mean: (R, 3) float32 pool rows of landmark means; cov: (R, 9) float32 covariances.
+        rows: (M, V) pool row of each particle's pair v; vb: (V,) observation of pair v.
+        maha, det: (M, V) outputs.
+    """
+    with_pose = pose_cov.shape[0] > 0
+    for m in range(rows.shape[0]):
+        for v in range(rows.shape[1]):
+            row = rows[m, v]
+            b = vb[v]
+            mx, my, mz = np.float64(mean[row, 0]), np.float64(mean[row, 1]), np.float64(mean[row, 2])
+            p = cov[row, 0] + rn[m, b, 0]
+            q = cov[row, 1] + rn[m, b, 1]
+            sx = cov[row, 2] + rn[m, b, 2]
+            d = cov[row, 4] + rn[m, b, 3]
+            e = cov[row, 5] + rn[m, b, 4]
+            f = cov[row, 8] + rn[m, b, 5]
+            if with_pose:
+                dx = mx - pose[m, 0]
+                dy = my - pose[m, 1]
+                pc = pose_cov[m]
+                p += pc[0] - 2.0 * dy * pc[2] + dy * dy * pc[5]
+                q += pc[1] + dx * pc[2] - dy * pc[4] - dx * dy * pc[5]
+                d += pc[3] + 2.0 * dx * pc[4] + dx * dx * pc[5]
+            x = lm[m, b, 0] - mx
+            y = lm[m, b, 1] - my
+            zz = lm[m, b, 2] - mz
+            c00 = d * f - e * e
+            c01 = sx * e - q * f
+            c02 = q * e - sx * d
+            dt = p * c00 + q * c01 + sx * c02
+            num = c00 * x * x + (p * f - sx * sx) * y * y + (p * d - q * q) * zz * zz
+            num += 2.0 * (c01 * x * y + c02 * x * zz + (q * sx - p * e) * y * zz)
+            maha[m, v] = num / dt
+            det[m, v] = dt
+
+
+@njit(cache=True)
+def kalman(pose, c, s, z, r, pi, bi, mean, cov, rows, new_mu, new_sig, maha, det):
+    """EKF update of P chosen pairs (particle pi[i], observation bi[i], landmark at rows[i]):
+    S = Σ + Rz R Rzᵀ, A = S⁻¹ (cofactors), T = Σ A, μ' = μ + T ν, Σ' = Σ − T Σ.
+
+    Args:
+        pose: (M, 3); c, s: (M,) cos/sin of the pose angles; z: (B, 3); r: (B, 3, 3).
+        pi, bi: (P,) particle and observation of each pair.
+        mean: (R, 3), cov: (R, 9) landmark values by row (float32 pools or float64), read at
+            rows (P,).
+        new_mu (P, 3), new_sig (P, 9), maha (P,), det (P,): outputs (float64).
+    """
+    for i in range(rows.size):
+        row = rows[i]
+        p, b = pi[i], bi[i]
+        ci, si = c[p], s[p]
+        s00, s01, s02 = np.float64(cov[row, 0]), np.float64(cov[row, 1]), np.float64(cov[row, 2])
+        s11, s12, s22 = np.float64(cov[row, 4]), np.float64(cov[row, 5]), np.float64(cov[row, 8])
+        rxx, rxy, rxz = r[b, 0, 0], r[b, 0, 1], r[b, 0, 2]
+        ryy, ryz, rzz = r[b, 1, 1], r[b, 1, 2], r[b, 2, 2]
+        zx, zy = z[b, 0], z[b, 1]
+        mx, my, mz = np.float64(mean[row, 0]), np.float64(mean[row, 1]), np.float64(mean[row, 2])
+        x = pose[p, 0] + ci * zx - si * zy - mx
+        y = pose[p, 1] + si * zx + ci * zy - my
+        zz = z[b, 2] - mz
+        cc, ss, cs = ci * ci, si * si, ci * si
+        p = s00 + (cc * rxx - 2 * cs * rxy + ss * ryy)
+        d = s11 + (ss * rxx + 2 * cs * rxy + cc * ryy)
+        q = s01 + (cs * (rxx - ryy) + (cc - ss) * rxy)
+        sx = s02 + (ci * rxz - si * ryz)
+        e = s12 + (si * rxz + ci * ryz)
+        f = s22 + rzz
+        c00 = d * f - e * e
+        c01 = sx * e - q * f
+        c02 = q * e - sx * d
+        c11 = p * f - sx * sx
+        c12 = q * sx - p * e
+        c22 = p * d - q * q
+        dt = p * c00 + q * c01 + sx * c02
+        inv = 1.0 / dt
+        a00, a01, a02, a11, a12, a22 = c00 * inv, c01 * inv, c02 * inv, c11 * inv, c12 * inv, c22 * inv
+        t00 = s00 * a00 + s01 * a01 + s02 * a02
+        t01 = s00 * a01 + s01 * a11 + s02 * a12
+        t02 = s00 * a02 + s01 * a12 + s02 * a22
+        t10 = s01 * a00 + s11 * a01 + s12 * a02
+        t11 = s01 * a01 + s11 * a11 + s12 * a12
+        t12 = s01 * a02 + s11 * a12 + s12 * a22
+        t20 = s02 * a00 + s12 * a01 + s22 * a02
+        t21 = s02 * a01 + s12 * a11 + s22 * a12
+        t22 = s02 * a02 + s12 * a12 + s22 * a22
+        new_mu[i, 0] = mx + t00 * x + t01 * y + t02 * zz
+        new_mu[i, 1] = my + t10 * x + t11 * y + t12 * zz
+        new_mu[i, 2] = mz + t20 * x + t21 * y + t22 * zz
+        v00 = s00 - (t00 * s00 + t01 * s01 + t02 * s02)
+        v11 = s11 - (t10 * s01 + t11 * s11 + t12 * s12)
+        v22 = s22 - (t20 * s02 + t21 * s12 + t22 * s22)
+        v01 = s01 - (t00 * s01 + t01 * s11 + t02 * s12)
+        v02 = s02 - (t00 * s02 + t01 * s12 + t02 * s22)
+        v12 = s12 - (t10 * s02 + t11 * s12 + t12 * s22)
+        new_sig[i, 0], new_sig[i, 1], new_sig[i, 2] = v00, v01, v02
+        new_sig[i, 3], new_sig[i, 4], new_sig[i, 5] = v01, v11, v12
+        new_sig[i, 6], new_sig[i, 7], new_sig[i, 8] = v02, v12, v22
+        maha[i] = a00 * x * x + a11 * y * y + a22 * zz * zz + 2.0 * (a01 * x * y + a02 * x * zz + a12 * y * zz)
+        det[i] = dt
+
+
+@njit(cache=True)
+def proposal_terms(x, dx, c, s, z, r, pi, bi, mean, cov, rows, info, eta, quad, det, nu, zinv, hx):
+    """Per-pair terms of the FastSLAM 2.0 proposal linearised at the poses x (M, 3), map frame:
+    Hₓ = ∂(g⁻¹(x, z) − μ)/∂x up to sign = [[−1, 0, Δy], [0, −1, −Δx], [0, 0, 0]] with (Δx, Δy) =
+    μ − x, Z = Σ + Rz R Rzᵀ, ν = g⁻¹(x, z) − μ + Hₓ dx (the iterated EKF's shift, dx = x − x̂).
+
+    Args:
+        x, dx: (M, 3); c, s: (M,) cos/sin of x's angles; z: (B, 3); r: (B, 3, 3).
+        pi, bi, rows: (P,) particle, observation and landmark pool row of each pair; mean (R, 3)
+            and cov (R, 9) the pools.
+        info (P, 3, 3) HₓᵀZ⁻¹Hₓ, eta (P, 3) HₓᵀZ⁻¹ν, quad (P,) νᵀZ⁻¹ν, det (P,) |Z|, nu (P, 3),
+        zinv (P, 3, 3), hx (P, 3, 3): outputs.
+    """
+    for i in range(rows.size):
+        p, b, row = pi[i], bi[i], rows[i]
+        ci, si = c[p], s[p]
+        mx, my, mz = np.float64(mean[row, 0]), np.float64(mean[row, 1]), np.float64(mean[row, 2])
+        rxx, rxy, rxz = r[b, 0, 0], r[b, 0, 1], r[b, 0, 2]
+        ryy, ryz = r[b, 1, 1], r[b, 1, 2]
+        cc, ss, cs = ci * ci, si * si, ci * si
+        p00 = cov[row, 0] + (cc * rxx - 2 * cs * rxy + ss * ryy)
+        d = cov[row, 4] + (ss * rxx + 2 * cs * rxy + cc * ryy)
+        q = cov[row, 1] + (cs * (rxx - ryy) + (cc - ss) * rxy)
+        sx = cov[row, 2] + (ci * rxz - si * ryz)
+        e = cov[row, 5] + (si * rxz + ci * ryz)
+        f = cov[row, 8] + r[b, 2, 2]
+        c00 = d * f - e * e
+        c01 = sx * e - q * f
+        c02 = q * e - sx * d
+        c11 = p00 * f - sx * sx
+        c12 = q * sx - p00 * e
+        c22 = p00 * d - q * q
+        dt = p00 * c00 + q * c01 + sx * c02
+        inv = 1.0 / dt
+        a00, a01, a02, a11, a12, a22 = c00 * inv, c01 * inv, c02 * inv, c11 * inv, c12 * inv, c22 * inv
+        ddx = mx - x[p, 0]
+        ddy = my - x[p, 1]
+        # ν = g⁻¹(x, z) − μ + Hₓ dx
+        n0 = x[p, 0] + ci * z[b, 0] - si * z[b, 1] - mx + (-dx[p, 0] + ddy * dx[p, 2])
+        n1 = x[p, 1] + si * z[b, 0] + ci * z[b, 1] - my + (-dx[p, 1] - ddx * dx[p, 2])
+        n2 = z[b, 2] - mz
+        # A ν and A Hₓ's columns (Hₓ e0 = (−1, 0, 0), Hₓ e1 = (0, −1, 0), Hₓ e2 = (Δy, −Δx, 0))
+        an0 = a00 * n0 + a01 * n1 + a02 * n2
+        an1 = a01 * n0 + a11 * n1 + a12 * n2
+        an2 = a02 * n0 + a12 * n1 + a22 * n2
+        h2x, h2y = ddy, -ddx
+        ah2_0 = a00 * h2x + a01 * h2y
+        ah2_1 = a01 * h2x + a11 * h2y
+        info[i, 0, 0] = a00
+        info[i, 0, 1] = a01
+        info[i, 1, 0] = a01
+        info[i, 1, 1] = a11
+        info[i, 0, 2] = -ah2_0
+        info[i, 2, 0] = -ah2_0
+        info[i, 1, 2] = -ah2_1
+        info[i, 2, 1] = -ah2_1
+        info[i, 2, 2] = h2x * ah2_0 + h2y * ah2_1
+        eta[i, 0] = -an0
+        eta[i, 1] = -an1
+        eta[i, 2] = h2x * an0 + h2y * an1
+        quad[i] = n0 * an0 + n1 * an1 + n2 * an2
+        det[i] = dt
+        nu[i, 0], nu[i, 1], nu[i, 2] = n0, n1, n2
+        zinv[i, 0, 0], zinv[i, 0, 1], zinv[i, 0, 2] = a00, a01, a02
+        zinv[i, 1, 0], zinv[i, 1, 1], zinv[i, 1, 2] = a01, a11, a12
+        zinv[i, 2, 0], zinv[i, 2, 1], zinv[i, 2, 2] = a02, a12, a22
+        hx[i, 0, 0], hx[i, 0, 1], hx[i, 0, 2] = -1.0, 0.0, h2x
+        hx[i, 1, 0], hx[i, 1, 1], hx[i, 1, 2] = 0.0, -1.0, h2y
+        hx[i, 2, 0], hx[i, 2, 1], hx[i, 2, 2] = 0.0, 0.0, 0.0
