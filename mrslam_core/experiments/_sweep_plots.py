@@ -68,12 +68,16 @@ def plot_all(records: list[dict], summary: dict, folder: Path) -> list[Path]:
     fig, ax = plt.subplots(figsize=(9, 0.9 + 0.28 * len(records)))
     y = np.arange(len(records))
     for k, r in enumerate(records):
-        stuck = [m["stuck_s"] for m in r["robots"].values()]
-        ax.plot(stuck, [k] * len(stuck), "o", color="tab:blue", ms=4)
+        still = [m.get("still_s", np.nan) for m in r["robots"].values()]
+        stay = [m["stuck_s"] for m in r["robots"].values()]
+        ax.plot(stay, [k] * len(stay), "o", mfc="none", color="tab:grey", ms=5,
+                label="position within the radius (turns on the spot count)" if k == 0 else None)
+        ax.plot(still, [k] * len(still), "o", color="tab:blue", ms=4,
+                label="no point of the body moved the radius" if k == 0 else None)
     ax.axvline(c["stuck_max_s"], color="tab:red", ls="--", lw=1, label="target")
     ax.set_yticks(y, labels, fontsize=7)
     ax.invert_yaxis()
-    ax.set_xlabel(f"longest time a robot stayed within {c['stuck_radius_m']:g} m [s] (a dot per robot)")
+    ax.set_xlabel(f"longest time a robot stood, radius {c['stuck_radius_m']:g} m [s] (a dot per robot)")
     ax.legend(fontsize=8)
     ax.grid(True, axis="x", alpha=0.3)
     save(fig, "sweep_stuck.png")
