@@ -19,6 +19,12 @@ class ObservationSet:
         cov: (B, dim, dim) measurement covariances, same units squared.
         descriptors: (B, D) float32 appearance descriptors (D may be 0: no descriptor).
         track_ids: (B,) int64 frontend track ids (-1 where unknown).
+        sightings: the other robots measured at the same instant (each ``observer`` is
+            ``robot``); scored in the particle weights, not mapped. A set may hold sightings and
+            no landmark measurements (B = 0), or neither (the robot's motion up to ``stamp_ns``).
+
+    Raises:
+        ValueError: arrays of inconsistent shapes, or a sighting by another robot.
     """
 
     robot: str
@@ -27,6 +33,7 @@ class ObservationSet:
     cov: np.ndarray
     descriptors: np.ndarray = field(default_factory=lambda: np.zeros((0, 0), np.float32))
     track_ids: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    sightings: tuple[RobotSighting, ...] = ()
 
     def __post_init__(self) -> None:
         z = np.asarray(self.z, dtype=float)
@@ -50,6 +57,11 @@ class ObservationSet:
         object.__setattr__(self, "cov", cov)
         object.__setattr__(self, "descriptors", desc)
         object.__setattr__(self, "track_ids", tid)
+        sightings = tuple(self.sightings)
+        for s in sightings:
+            if s.observer != self.robot:
+                raise ValueError(f"a sighting by {s.observer!r} in a set of {self.robot!r}")
+        object.__setattr__(self, "sightings", sightings)
 
     def __len__(self) -> int:
         return self.z.shape[0]

@@ -262,19 +262,19 @@ def mrclam_inputs(ds: MrclamDataset, cfg: MrclamConfig) -> dict:
     t0, t1 = ds.time_span()
     if cfg.duration is not None:
         t1 = min(t1, t0 + cfg.duration)
-    times = t0 + cfg.step_period * np.arange(int(np.floor((t1 - t0) / cfg.step_period)) + 1)
-    odo = {i: OdometryIntegrator(ds.robots[i].odometry, cfg.odometry_delay) for i in cfg.robots}
-    delta = np.array([[odo[i].delta(a, b) for a, b in zip(times[:-1], times[1:])] for i in cfg.robots])
+    times = t0 + cfg.team_step * np.arange(int(np.floor((t1 - t0) / cfg.team_step)) + 1)
+    odo = {i: OdometryIntegrator(ds.robots[i].odometry, cfg.odometry_delay) for i in cfg.numbers}
+    delta = np.array([[odo[i].delta(a, b) for a, b in zip(times[:-1], times[1:])] for i in cfg.numbers])
     cov = np.array([
         [odometry_covariance(d, b - a, cfg) for d, a, b in zip(dr, times[:-1], times[1:])] for dr in delta
     ])
     rows = []
-    for i in cfg.robots:
+    for i in cfg.numbers:
         m = ds.robots[i].measurements
         m = m[(m[:, 0] > t0) & (m[:, 0] <= times[-1])]
         if not cfg.use_sightings:
             m = m[m[:, 1] > ds.num_robots]
-        m = m[(m[:, 1] > ds.num_robots) | np.isin(m[:, 1], cfg.robots)]
+        m = m[(m[:, 1] > ds.num_robots) | np.isin(m[:, 1], cfg.numbers)]
         # one reading per (stamp, subject), the last one in the file, as the filter keeps
         _, last = np.unique(m[::-1, :2], axis=0, return_index=True)
         m = m[::-1][last]
@@ -284,8 +284,8 @@ def mrclam_inputs(ds: MrclamDataset, cfg: MrclamConfig) -> dict:
         rows.append(np.column_stack([np.full(len(m), i), m[:, 0], m[:, 1], rb]))
     return {
         "pose_times": times,
-        "robot_ids": tuple(cfg.robots),
-        "starts": np.array([ds.groundtruth(i, times[:1])[0] for i in cfg.robots]),
+        "robot_ids": tuple(cfg.numbers),
+        "starts": np.array([ds.groundtruth(i, times[:1])[0] for i in cfg.numbers]),
         "odometry": delta,
         "odometry_cov": cov,
         "measurements": np.concatenate(rows),
@@ -336,7 +336,7 @@ def main(argv: list[str]) -> int:
     cfg = MrclamConfig()
     changes: dict[str, Any] = {"duration": args.seconds}
     if args.period:
-        changes["step_period"] = args.period
+        changes["team_step"] = args.period
     if args.no_sightings:
         changes["use_sightings"] = False
     cfg = replace(cfg, **changes)
@@ -346,10 +346,10 @@ def main(argv: list[str]) -> int:
     graph = build_graph(**inputs)
     build_s = time.perf_counter() - t
     times = inputs["pose_times"]
-    gt = np.array([ds.groundtruth(i, times) for i in cfg.robots])
+    gt = np.array([ds.groundtruth(i, times) for i in cfg.numbers])
     n_meas = len(inputs["measurements"])
-    n_sight = int(np.isin(inputs["measurements"][:, 2], cfg.robots).sum())
-    print(f"MR.CLAM {args.folder}: {len(cfg.robots)} robots × {len(times)} poses every {cfg.step_period:g} s "
+    n_sight = int(np.isin(inputs["measurements"][:, 2], cfg.numbers).sum())
+    print(f"MR.CLAM {args.folder}: {len(cfg.numbers)} robots × {len(times)} poses every {cfg.team_step:g} s "
           f"({times[-1] - times[0]:.0f} s), {n_meas} measurements ({n_sight} sightings), "
           f"{len(graph.landmark_keys)} landmarks; graph built in {build_s:.1f} s", flush=True)
 
@@ -376,10 +376,10 @@ def main(argv: list[str]) -> int:
         ates, note = _filter_row(args.filter_report)
         rows["filter (report.json)"] = {"ate": ates, "time_s": None}
 
-    names = [f"robot {i}" for i in cfg.robots]
+    names = [f"robot {i}" for i in cfg.numbers]
     lines = [
         f"GTSAM baseline, MR.CLAM {args.folder}, first {times[-1] - times[0]:.0f} s, poses every "
-        f"{cfg.step_period:g} s, iSAM2 update every {args.isam_every} pose time(s); ATE RMSE [m] against Vicon "
+        f"{cfg.team_step:g} s, iSAM2 update every {args.isam_every} pose time(s); ATE RMSE [m] against Vicon "
         "at the pose times, no alignment; landmarks: position error against Landmark_Groundtruth, RMSE (max)",
         "",
         "| method | " + " | ".join(names) + " | mean | landmarks [m] | time [s] |",
@@ -394,7 +394,7 @@ def main(argv: list[str]) -> int:
         lines += ["", f"filter row: {args.filter_report} ({note})"]
     lines += ["", "iSAM2 online = each pose's estimate right after the update that added it (causal); "
               "iSAM2 final = the smoothed estimate at the end; time of iSAM2 = all updates."]
-    data = {"dataset": str(args.folder), "period_s": cfg.step_period, "seconds": float(times[-1] - times[0]),
+    data = {"dataset": str(args.folder), "period_s": cfg.team_step, "seconds": float(times[-1] - times[0]),
             "isam_every": args.isam_every, "build_s": build_s, "measurements": n_meas, "sightings": n_sight,
             "robots": names, "rows": rows}
     write_tables(args.out, "baseline_gtsam", "\n".join(lines), data)

@@ -32,7 +32,7 @@ from mrslam_core.fusion.config import FusionConfig
 from mrslam_core.fusion.gauge import hold_gauge
 from mrslam_core.fusion.join import try_join
 from mrslam_core.fusion.rendezvous import RendezvousGate, join_rendezvous, sighting_transform
-from mrslam_core.pipelines.mrclam import MrclamConfig, _bins, _one_hot
+from mrslam_core.pipelines.mrclam import MrclamConfig, _one_hot, measurement_frames
 from mrslam_core.pipelines.mrclam import run as run_known_start
 from mrslam_core.slam.config import FilterConfig
 from mrslam_core.slam.filter import MultiRobotFastSLAM, RobotUpdate
@@ -106,12 +106,12 @@ def run_unknown_start(ds: MrclamDataset, cfg: MrclamFusionConfig, progress: bool
          [reasons]}, "update_ms": (S,)}
     """
     mc = cfg.mrclam
-    robots = mc.robots
+    robots = mc.numbers
     t0, t1 = ds.time_span()
     if mc.duration is not None:
         t1 = min(t1, t0 + mc.duration)
-    nsteps = int(np.floor((t1 - t0) / mc.step_period))
-    times = t0 + mc.step_period * np.arange(nsteps + 1)
+    nsteps = int(np.floor((t1 - t0) / mc.team_step))
+    times = t0 + mc.team_step * np.arange(nsteps + 1)
     name = {i: f"robot{i}" for i in robots}
     starts = {i: ds.groundtruth(i, np.array([t0]))[0] for i in robots}
     odo = {i: OdometryIntegrator(ds.robots[i].odometry, mc.odometry_delay) for i in robots}
@@ -119,14 +119,10 @@ def run_unknown_start(ds: MrclamDataset, cfg: MrclamFusionConfig, progress: bool
     rr_cov = np.diag([mc.sigma_sighting_range**2, mc.sigma_sighting_bearing**2])
 
     per_step: dict[int, dict[int, np.ndarray]] = {}
-    for i in robots:  # as in the known-start pipeline: one reading per subject and stamp
-        m = ds.robots[i].measurements
-        m = m[(m[:, 0] > t0) & (m[:, 0] <= times[-1])]
-        m = m[np.lexsort((m[:, 1], m[:, 0]))]
-        keep = np.ones(len(m), bool)
-        keep[:-1] = (m[1:, 0] != m[:-1, 0]) | (m[1:, 1] != m[:-1, 1])
-        m = m[keep]
-        k = _bins(m[:, 0], t0, mc.step_period)
+    for i in robots:  # the known-start pipeline's frames, by window k: (t0 + (k−1)·period, t0 + k·period]
+        frames = measurement_frames(ds, i, t0, times[-1])
+        m = np.concatenate(frames) if frames else np.zeros((0, 4))
+        k = np.maximum(np.ceil((m[:, 0] - t0) / mc.team_step - 1e-9), 1).astype(np.int64)
         splits = np.flatnonzero(np.diff(k)) + 1
         per_step[i] = {int(kk[0]): mm for kk, mm in zip(np.split(k, splits), np.split(m, splits)) if len(kk)}
 
@@ -144,7 +140,7 @@ def run_unknown_start(ds: MrclamDataset, cfg: MrclamFusionConfig, progress: bool
         est[name[i]][0] = starts[i]
     merged: dict[str, dict] = {}
     attempts: dict[str, list[str]] = {name[i]: [] for i in local}
-    every = max(round(cfg.try_every / mc.step_period), 1)
+    every = max(round(cfg.try_every / mc.team_step), 1)
     gate = RendezvousGate.from_config(cfg.fusion)
 
     def updates_for(i: int, k: int, group: list[int]) -> list[RobotUpdate]:
@@ -228,8 +224,7 @@ def run_unknown_start(ds: MrclamDataset, cfg: MrclamFusionConfig, progress: bool
                     continue
                 record(i, k, al.transform, joined, "map alignment", int(al.inliers.size), len(al.matches), al.rmse)
         step_ms.append((time.perf_counter() - tic) * 1e3)
-        e = central.estimate()
-        poses = e.mean if mc.estimate == "mean" else e.poses
+        poses = central.estimate().mean
         for j, rname in enumerate(central.robots):
             est[rname][k] = poses[j]
         if progress and k % report_every == 0:

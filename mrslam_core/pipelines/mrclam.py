@@ -1,69 +1,111 @@
-"""``mrslam mrclam DIR``: the multi-robot filter on a UTIAS MR.CLAM dataset.
+"""``mrslam mrclam DIR``: the multi-robot filter on a UTIAS MR.CLAM dataset, through the central mapper.
 
-All robots run in ONE filter (``mode: joint``) or one filter each (``mode: independent``, the
+The dataset is fed to :class:`~mrslam_core.pipelines.central.CentralMapper` as a live team would
+feed it: each robot's odometry poses (dead reckoning from the logged velocities, at the log's
+samples) through ``add_odometry``, and one observation set per measurement frame
+through ``add_observations``, so the mapper's ordering, pairing and corrections run on real data.
+All robots share ONE mapper (``mode: joint``) or have one each (``mode: independent``, the
 baseline). Landmarks are associated by descriptor only: the barcode a robot reads is turned into a
-one-hot descriptor, so the filter gets no landmark ids, only appearance. Measurements of other
-robots' barcodes become range-bearing likelihood terms in the joint filter (each particle holds
-every robot's pose). Start poses come from ground truth at the first common timestamp.
+one-hot descriptor, so the filter gets no landmark ids, only appearance. A frame's readings of
+other robots' barcodes travel in its set as sightings (:class:`~mrslam_core.types.RobotSighting`)
+and become range-bearing likelihood terms in the joint filter (each particle holds every robot's
+pose). Start poses come from ground truth at the first common timestamp.
 """
 
 from __future__ import annotations
 
 import argparse
+import re
 import sys
 import time
 from dataclasses import dataclass, field, replace
+from functools import lru_cache
 from pathlib import Path
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 
-from mrslam_core.configio import ConfigError, load_yaml, profile_section
+from mrslam_core.configio import PROFILES, ConfigError, load_profile, load_yaml
 from mrslam_core.datasets.mrclam import MrclamDataset, OdometryIntegrator
-from mrslam_core.evaluation.report import write_run
+from mrslam_core.evaluation.metrics import interpolate_poses
+from mrslam_core.evaluation.report import latency_summary, write_run
+from mrslam_core.pipelines.central import CentralConfig, CentralMapper, MapCheckConfig
 from mrslam_core.slam.config import FilterConfig
-from mrslam_core.slam.filter import MultiRobotFastSLAM, RobotUpdate
 from mrslam_core.types import ObservationSet, RobotSighting
 
 
-#: the MR.CLAM profile (in configio.PROFILES): MrclamConfig's filter default
+#: the MR.CLAM profile (in configio.PROFILES): the defaults of MrclamConfig's mapper fields it sets
 MRCLAM_PROFILE = "mrclam.yaml"
 
 
+@lru_cache(maxsize=1)
+def _profile() -> CentralConfig:
+    """The central mapper's fields as the MR.CLAM profile sets them (read once)."""
+    return load_profile(CentralConfig, PROFILES / MRCLAM_PROFILE)
+
+
+def _from_profile(name: str) -> Any:
+    """A field whose default is the MR.CLAM profile's value of the mapper's field ``name``."""
+    return field(default_factory=lambda: getattr(_profile(), name))
+
+
 @dataclass(frozen=True)
-class MrclamConfig:
-    """The MR.CLAM run.
+class MrclamConfig(CentralConfig):
+    """The MR.CLAM run: the central mapper's fields (``filter``, ``team_step``, ``map_check``,
+    ``relocalize_after``, ...; defaults from the MR.CLAM profile, config/mrclam.yaml, where it
+    sets them; ``start_poses`` come from the data) plus:
 
     Attributes:
-        filter: the filter (range-bearing model); by default the MR.CLAM profile
-            (config/mrclam.yaml).
+        robots: robots to run, ``robot<i>`` for the dataset's robot i (1..5).
+        start_poses: not used: every robot starts at its Vicon pose at the first common stamp.
+        team_step: the mapper's team step (> 0 here): every robot's motion is also brought to
+            the end of each window by a set without observations if it measured nothing at
+            that instant, and the reported trajectories are sampled there [s].
         sigma_range, sigma_bearing: landmark measurement noise [m], [rad] (dataset 6 against
             Vicon: 0.12–0.19 m, 0.009–0.019 rad).
         sigma_sighting_range, sigma_sighting_bearing: noise of robot-to-robot measurements
             [m], [rad] (the barcode sits off the robot's centre, so larger).
-        use_sightings: score robot-to-robot measurements in the particle weights.
-        step_period: filter step period [s]; measurements are grouped into these windows.
-        robots: robot numbers to run (1..5).
-        mode: one joint filter, or independent single-robot filters.
+        use_sightings: put robot-to-robot measurements into the sets (scored in the particle
+            weights).
+        mode: one joint filter (one mapper), or independent single-robot filters (one mapper
+            per robot, no sightings).
         duration: seconds from the start to process (None: all).
-        estimate: the pose reported per step: the best particle's (eq. 14) or the weighted mean.
         odometry_delay: seconds by which the logged (commanded) velocities precede the motion
             they cause; 0.25 s on dataset 6 (it minimises the heading error of 1 s odometry
             increments against Vicon: 0.041 rad undelayed, 0.026 rad delayed).
     """
 
-    filter: FilterConfig = field(default_factory=lambda: profile_section(FilterConfig, MRCLAM_PROFILE, "filter"))
+    robots: tuple[str, ...] = ("robot1", "robot2", "robot3", "robot4", "robot5")
+    start_poses: tuple[float, ...] = ()
+    team_step: float = _from_profile("team_step")
+    relocalize_after: float = _from_profile("relocalize_after")
+    map_check: MapCheckConfig = _from_profile("map_check")
+    filter: FilterConfig = _from_profile("filter")
     sigma_range: float = 0.15
     sigma_bearing: float = 0.02
     sigma_sighting_range: float = 0.25
     sigma_sighting_bearing: float = 0.04
     use_sightings: bool = True
-    step_period: float = 0.2
-    robots: tuple[int, ...] = (1, 2, 3, 4, 5)
     mode: Literal["joint", "independent"] = "joint"
     duration: float | None = None
-    estimate: Literal["best", "mean"] = "mean"
     odometry_delay: float = 0.25
+
+    def __post_init__(self) -> None:
+        bad = [r for r in self.robots if not re.fullmatch(r"robot[1-9][0-9]*", r)]
+        if bad or not self.robots:
+            raise ValueError(f"robots must be names robot<i> of the dataset's robots, got {list(self.robots)}")
+        if not self.team_step > 0:
+            raise ValueError("team_step must be > 0: the window every robot's motion reaches")
+
+    @property
+    def numbers(self) -> tuple[int, ...]:
+        """The dataset's robot numbers of ``robots``."""
+        return tuple(robot_number(r) for r in self.robots)
+
+
+def robot_number(name: str) -> int:
+    """The MR.CLAM robot number of ``robot<i>``."""
+    return int(name[len("robot"):])
 
 
 def _one_hot(subjects: np.ndarray, n: int = 21) -> np.ndarray:
@@ -72,120 +114,130 @@ def _one_hot(subjects: np.ndarray, n: int = 21) -> np.ndarray:
     return d
 
 
-def _bins(times: np.ndarray, t0: float, period: float) -> np.ndarray:
-    """Step index k >= 1 of each time: the window (t0 + (k−1)·period, t0 + k·period]."""
-    return np.maximum(np.ceil((times - t0) / period - 1e-9), 1).astype(np.int64)
+def measurement_frames(ds: MrclamDataset, robot: int, t0: float, t1: float) -> list[np.ndarray]:
+    """Robot ``robot``'s measurements in (t0, t1] [s] as frames: one (n, 4) array (t, subject,
+    range, bearing) per timestamp, in time order, one reading per subject (a frame that reads the
+    same barcode twice keeps the last reading)."""
+    m = ds.robots[robot].measurements
+    m = m[(m[:, 0] > t0) & (m[:, 0] <= t1)]
+    m = m[np.lexsort((m[:, 1], m[:, 0]))]
+    keep = np.ones(len(m), bool)
+    keep[:-1] = (m[1:, 0] != m[:-1, 0]) | (m[1:, 1] != m[:-1, 1])
+    m = m[keep]
+    return np.split(m, np.flatnonzero(np.diff(m[:, 0])) + 1) if len(m) else []
+
+
+def observation_sets(ds: MrclamDataset, cfg: MrclamConfig, robot: str, team: tuple[str, ...],
+                     t0: float, t1: float) -> list[ObservationSet]:
+    """Robot ``robot``'s sets in (t0, t1] [s], stamps in ns from t0: one per measurement frame
+    (its landmark readings as range-bearing with a one-hot barcode descriptor; its readings of
+    the ``team``'s other robots as sightings, with ``use_sightings``) and one without
+    observations at the end of every ``team_step`` window in which no frame fell on that
+    instant (the robot's motion up to there)."""
+    lm_cov = np.diag([cfg.sigma_range**2, cfg.sigma_bearing**2])
+    rr_cov = np.diag([cfg.sigma_sighting_range**2, cfg.sigma_sighting_bearing**2])
+    targets = {robot_number(r): r for r in team} if cfg.use_sightings and len(team) > 1 else {}
+    sets = []
+    for frame in measurement_frames(ds, robot_number(robot), t0, t1):
+        stamp = int(round((frame[0, 0] - t0) * 1e9))
+        lm = frame[frame[:, 1] > ds.num_robots]
+        sightings = tuple(RobotSighting(robot, targets[int(row[1])], row[2:4].copy(), rr_cov)
+                          for row in frame if int(row[1]) in targets)
+        sets.append(ObservationSet(robot, stamp, lm[:, 2:4], np.broadcast_to(lm_cov, (len(lm), 2, 2)),
+                                   _one_hot(lm[:, 1]), sightings=sightings))
+    period_ns = int(round(cfg.team_step * 1e9))
+    ends = period_ns * np.arange(1, int(np.floor((t1 - t0) / cfg.team_step + 1e-9)) + 1)
+    taken = {o.stamp_ns for o in sets}
+    sets += [ObservationSet(robot, int(s), np.zeros((0, 2)), np.zeros((0, 2, 2))) for s in ends if int(s) not in taken]
+    return sorted(sets, key=lambda o: o.stamp_ns)
+
+
+def odometry_knots(odo: OdometryIntegrator, t0: float) -> np.ndarray:
+    """The stamps (N,) int64 [ns from t0 [s]] of the log's samples (delayed), distinct, sorted."""
+    return np.unique(np.round((odo.t - t0) * 1e9).astype(np.int64))
+
+
+def odometry_poses(odo: OdometryIntegrator, t0: float, knots: np.ndarray, after_ns: int,
+                   end_ns: int) -> tuple[np.ndarray, np.ndarray]:
+    """The dead reckoning's poses to feed for the stamps in (after_ns, end_ns] [ns from t0 [s]]:
+    at the log's samples (``knots``, :func:`odometry_knots`), at ``end_ns``, and at 0 if that is
+    in the span: the mapper's linear interpolation between them is ``odo``'s own.
+
+    Returns:
+        (stamps (N,) int64 [ns], poses (N, 3) odom frame [m, rad], θ unwrapped)."""
+    inside = knots[np.searchsorted(knots, after_ns, "right"):np.searchsorted(knots, end_ns, "left")]
+    stamps = np.concatenate([[0] if after_ns < 0 <= end_ns and (not inside.size or inside[0] != 0) else [],
+                             inside, [end_ns]]).astype(np.int64)
+    return stamps, odo.pose(t0 + stamps * 1e-9)
 
 
 def run(ds: MrclamDataset, cfg: MrclamConfig, progress: bool = False) -> dict:
-    """Run the filter(s); returns trajectories, step times, maps, counters.
+    """Feed the dataset to the central mapper(s); returns trajectories, step times, maps, counters.
 
     Returns:
-        {"trajectories": {robot: {"t", "est", "gt", "odom"}}, "update_ms": (S,),
-         "landmarks": {"mean", "cov"} of the (first) filter's best particle, "dropped": {...}}
+        {"trajectories": {robot: {"t", "est", "gt", "odom"}} at the ``team_step`` grid,
+         "update_ms": (S,) wall time per team step of all the mappers' work (feeding, ordering,
+         filter steps) [ms], "mapper_ms": the mappers' own update times [ms], "landmarks": {"mean",
+         "cov"} of the (first) mapper's best particle, "dropped": the mappers' counters summed,
+         "resamples": per mapper}
     """
     t0, t1 = ds.time_span()
     if cfg.duration is not None:
         t1 = min(t1, t0 + cfg.duration)
-    nsteps = int(np.floor((t1 - t0) / cfg.step_period))
-    times = t0 + cfg.step_period * np.arange(nsteps + 1)
-    names = [f"robot{i}" for i in cfg.robots]
-    robot_of = {i: f"robot{i}" for i in cfg.robots}
-    starts = np.array([ds.groundtruth(i, np.array([t0]))[0] for i in cfg.robots])
-    odo = {i: OdometryIntegrator(ds.robots[i].odometry, cfg.odometry_delay) for i in cfg.robots}
-    lm_cov = np.diag([cfg.sigma_range**2, cfg.sigma_bearing**2])
-    rr_cov = np.diag([cfg.sigma_sighting_range**2, cfg.sigma_sighting_bearing**2])
-
-    # per robot: step index -> measurements in that window, sorted by time, one per subject
-    # and timestamp (a frame that reads the same barcode twice keeps the last reading)
-    per_step: dict[int, dict[int, np.ndarray]] = {}
-    for i in cfg.robots:
-        m = ds.robots[i].measurements
-        m = m[(m[:, 0] > t0) & (m[:, 0] <= times[-1])]
-        order = np.lexsort((m[:, 1], m[:, 0]))
-        m = m[order]
-        keep = np.ones(len(m), bool)
-        keep[:-1] = (m[1:, 0] != m[:-1, 0]) | (m[1:, 1] != m[:-1, 1])
-        m = m[keep]
-        k = _bins(m[:, 0], t0, cfg.step_period)
-        splits = np.flatnonzero(np.diff(k)) + 1
-        per_step[i] = {int(kk[0]): mm for kk, mm in zip(np.split(k, splits), np.split(m, splits)) if len(kk)}
-
-    if cfg.mode == "joint":
-        groups = [list(cfg.robots)]
-    else:
-        groups = [[i] for i in cfg.robots]
-    filters = [
-        MultiRobotFastSLAM(
-            replace(cfg.filter, seed=cfg.filter.seed + g), [robot_of[i] for i in grp],
-            starts[[cfg.robots.index(i) for i in grp]],
-        )
+    nsteps = int(np.floor((t1 - t0) / cfg.team_step + 1e-9))
+    times = t0 + cfg.team_step * np.arange(nsteps + 1)
+    t1 = times[-1]
+    starts = {r: ds.groundtruth(robot_number(r), np.array([t0]))[0] for r in cfg.robots}
+    odo = {r: OdometryIntegrator(ds.robots[robot_number(r)].odometry, cfg.odometry_delay) for r in cfg.robots}
+    groups = [cfg.robots] if cfg.mode == "joint" else [(r,) for r in cfg.robots]
+    mappers = [
+        CentralMapper(replace(cfg, robots=grp, start_poses=tuple(float(v) for r in grp for v in starts[r]),
+                              filter=replace(cfg.filter, seed=cfg.filter.seed + g)))
         for g, grp in enumerate(groups)
     ]
-    est = {n: np.zeros((nsteps + 1, 3)) for n in names}
-    for n, s in zip(names, starts):
-        est[n][0] = s
-
-    def robot_update(i: int, grp: list[int], frame: np.ndarray, ta: float, tb: float) -> RobotUpdate:
-        """Robot i's update: odometry from ta to tb [s], and what it measured at tb."""
-        stamp = int(round((tb - t0) * 1e9))
-        is_lm = frame[:, 1] > ds.num_robots
-        lm = frame[is_lm]
-        obs = None
-        if len(lm):
-            obs = ObservationSet(
-                robot_of[i], stamp, lm[:, 2:4], np.broadcast_to(lm_cov, (len(lm), 2, 2)), _one_hot(lm[:, 1])
-            )
-        sightings = []
-        if cfg.use_sightings and len(grp) > 1:
-            for row in frame[~is_lm]:
-                if int(row[1]) in grp:
-                    sightings.append(RobotSighting(robot_of[i], robot_of[int(row[1])], row[2:4], rr_cov))
-        return RobotUpdate(robot_of[i], stamp, odo[i].delta(ta, tb), obs, sightings)
+    sets = [{r: observation_sets(ds, cfg, r, grp, t0, t1) for r in grp} for grp in groups]
+    period_ns = int(round(cfg.team_step * 1e9))
+    knots = {r: odometry_knots(odo[r], t0) for r in cfg.robots}
+    cursor = [{r: 0 for r in grp} for grp in groups]  # each robot's next set to feed
 
     step_ms = []
     report_every = max(nsteps // 10, 1)
     for k in range(1, nsteps + 1):
-        t_start = time.perf_counter()
-        for slam, grp in zip(filters, groups):
-            updates = []
-            for i in grp:
-                m = per_step[i].get(k, np.zeros((0, 4)))
-                t_prev = times[k - 1]
-                for t_meas in np.unique(m[:, 0]):
-                    frame = m[m[:, 0] == t_meas]
-                    updates.append(robot_update(i, grp, frame, t_prev, t_meas))
-                    t_prev = t_meas
-                if t_prev < times[k]:
-                    updates.append(robot_update(i, grp, m[:0], t_prev, times[k]))
-            slam.step(updates)
-        step_ms.append((time.perf_counter() - t_start) * 1e3)
-        for slam, grp in zip(filters, groups):
-            poses = slam.estimate().mean if cfg.estimate == "mean" else slam.estimate().poses
-            for j, i in enumerate(grp):
-                est[robot_of[i]][k] = poses[j]
+        tic = time.perf_counter()
+        end = k * period_ns
+        for mapper, grp, mine, at in zip(mappers, groups, sets, cursor):
+            for r in grp:
+                stamps, poses = odometry_poses(odo[r], t0, knots[r], -1 if k == 1 else end - period_ns, end)
+                for s, p in zip(stamps.tolist(), poses):
+                    mapper.add_odometry(r, s, p)
+                while at[r] < len(mine[r]) and mine[r][at[r]].stamp_ns <= end:
+                    mapper.add_observations(mine[r][at[r]])
+                    at[r] += 1
+            mapper.process(flush=k == nsteps)
+        step_ms.append((time.perf_counter() - tic) * 1e3)
         if progress and k % report_every == 0:
             print(f"  step {k}/{nsteps} ({100 * k // nsteps}%)", file=sys.stderr, flush=True)
 
     trajectories = {}
-    for n, i in zip(names, cfg.robots):
-        trajectories[n] = {
-            "t": times - 0.0,
-            "est": est[n],
-            "gt": ds.groundtruth(i, times),
-            "odom": odo[i].trajectory(starts[cfg.robots.index(i)], times),
-        }
-    slots, mean, cov, _, _ = filters[0].best_map()
+    grid = (period_ns * np.arange(nsteps + 1)).astype(float)  # the window ends [ns from t0]
+    for mapper in mappers:
+        for r, (stamps, poses) in mapper.trajectories().items():
+            est = np.vstack([starts[r], interpolate_poses(grid[1:], stamps.astype(float), poses)]) if len(stamps) \
+                else np.full((len(times), 3), np.nan)
+            trajectories[r] = {"t": times - 0.0, "est": est, "gt": ds.groundtruth(robot_number(r), times),
+                               "odom": odo[r].trajectory(starts[r], times)}
+    _, mean, cov, _, _ = mappers[0].slam.best_map()
     dropped: dict[str, int] = {}
-    for slam in filters:
-        for key, v in slam.dropped.items():
+    for mapper in mappers:
+        for key, v in mapper.counters().items():
             dropped[key] = dropped.get(key, 0) + v
     return {
-        "trajectories": trajectories,
+        "trajectories": {r: trajectories[r] for r in cfg.robots},
         "update_ms": np.array(step_ms),
+        "mapper_ms": np.concatenate([np.asarray(m.update_ms, float) for m in mappers]),
         "landmarks": {"mean": mean, "cov": cov},
         "dropped": dropped,
-        "resamples": [slam.resamples for slam in filters],
+        "resamples": [m.slam.resamples for m in mappers],
     }
 
 
@@ -228,7 +280,8 @@ def main(argv: list[str]) -> int:
     res = run(ds, cfg, progress=True)
     report = write_run(
         args.out, res["trajectories"], cfg, res["update_ms"], res["landmarks"], ds.landmarks[:, 1:3],
-        extra={"dataset": str(args.folder), "dropped": res["dropped"], **landmark_errors(ds, res["landmarks"])},
+        extra={"dataset": str(args.folder), "dropped": res["dropped"], "resamples": res["resamples"],
+               "mapper_update_ms": latency_summary(res["mapper_ms"]), **landmark_errors(ds, res["landmarks"])},
     )
     for name, r in report["robots"].items():
         print(f"  {name}: ATE {r['ate_rmse_m']:.3f} m (odometry {r['odom_ate_rmse_m']:.3f} m, "

@@ -542,10 +542,10 @@ def test_every_attribute_of_a_part_is_in_its_state_or_comes_from_the_config():
     """A part that gains an attribute must save it in ``state()`` and take it in ``load_state()``
     (then list it here): a checkpoint that lists fields by hand missed some before. Not in the
     state: the config and what follows from it (``cfg``, ``robots``, ``_robots``, ``_known``,
-    ``_starts``, ``_wait_ns``), the mapper's shared ``drops`` (in the mapper's own state) and the
+    ``_starts``, ``_wait_ns``, ``_step_ns``), the mapper's shared ``drops`` (in the mapper's own state) and the
     queue's key set (``_queued``, rebuilt from the queue)."""
     m = CentralMapper(_cfg())
-    derived = {"cfg", "robots", "_robots", "_known", "_starts", "_wait_ns", "drops", "_queued"}
+    derived = {"cfg", "robots", "_robots", "_known", "_starts", "_wait_ns", "_step_ns", "drops", "_queued"}
     assert set(vars(m.ordering)) - derived == {"now_ns", "last", "_odom", "_queue", "_seq", "_latest_obs", "_first_ns"}
     assert set(vars(m.lifecycle)) - derived == {"local", "_updates", "merges", "restarts"}
     assert set(vars(m.corrections)) - derived == {"relocalizations", "map_checks", "distrusted",

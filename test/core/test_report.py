@@ -71,8 +71,8 @@ def test_config_errors_name_the_key(tmp_path):
     bad.write_text("filter: [1, 2\n")
     with pytest.raises(ConfigError, match="not valid YAML"):
         load_yaml(MrclamConfig, bad)
-    cfg = from_dict(MrclamConfig, {"robots": [1, 2], "filter": {"initial_pose_sigma": [0.1, 0.1, 0.01]}})
-    assert cfg.robots == (1, 2) and cfg.filter.initial_pose_sigma == (0.1, 0.1, 0.01)
+    cfg = from_dict(MrclamConfig, {"robots": ["robot1", "robot2"], "filter": {"initial_pose_sigma": [0.1, 0.1, 0.01]}})
+    assert cfg.robots == ("robot1", "robot2") and cfg.filter.initial_pose_sigma == (0.1, 0.1, 0.01)
     assert from_dict(MrclamConfig, to_dict(cfg)) == cfg
 
 

@@ -18,10 +18,10 @@ def test_declare_override_and_read_back():
         node = rclpy.create_node("params_test")
         declare_config(node, MrclamConfig())
         assert node.get_parameter("filter.motion.alpha1").value == MrclamConfig().filter.motion.alpha1
-        node.set_parameters([Parameter("filter.num_particles", value=42), Parameter("robots", value=[1, 3]),
+        node.set_parameters([Parameter("filter.num_particles", value=42), Parameter("robots", value=["robot1", "robot3"]),
                              Parameter("filter.association.candidate_search", value="spatial")])
         cfg = read_config(node, MrclamConfig)
-        assert cfg.filter.num_particles == 42 and cfg.robots == (1, 3)
+        assert cfg.filter.num_particles == 42 and cfg.robots == ("robot1", "robot3")
         assert cfg.filter.association.candidate_search == "spatial"
         node.set_parameters([Parameter("filter.association.mode", value="hungarian")])
         with pytest.raises(ConfigError, match="^filter.association.descriptor_trust_gate = 10000.0 does nothing with mode hungarian"):
@@ -46,7 +46,7 @@ def test_params_file_with_nested_keys_ints_for_floats_and_typos(tmp_path):
     from mrslam_ros.params import declare_config, read_config, unknown_overrides
 
     default = MrclamConfig()
-    params = {"filter": {"num_particles": 77, "motion": {"alpha1": 1}}, "robots": [2, 4, 5], "use_sim_time": True}
+    params = {"filter": {"num_particles": 77, "motion": {"alpha1": 1}}, "robots": ["robot2", "robot4", "robot5"], "use_sim_time": True}
     path = tmp_path / "p.yaml"
     path.write_text(yaml.safe_dump({"/**": {"ros__parameters": params}}))
     typo = tmp_path / "typo.yaml"
@@ -60,7 +60,7 @@ def test_params_file_with_nested_keys_ints_for_floats_and_typos(tmp_path):
         node = rclpy.create_node("params_file_test", cli_args=["--ros-args", "--params-file", str(path)])
         declare_config(node, default)
         cfg = read_config(node, MrclamConfig, strict=True)
-        assert cfg.filter.num_particles == 77 and cfg.robots == (2, 4, 5)
+        assert cfg.filter.num_particles == 77 and cfg.robots == ("robot2", "robot4", "robot5")
         assert cfg.filter.motion.alpha1 == 1.0 and isinstance(cfg.filter.motion.alpha1, float)
         assert cfg.filter.motion.alpha2 == default.filter.motion.alpha2  # untouched: the dataclass default
         assert node.get_parameter("use_sim_time").value is True

@@ -33,7 +33,8 @@ class MapCheckConfig:
     association gate reaches landmarks 0.3 m away, while descriptors do.
 
     Attributes:
-        every: seconds of a robot's sets between checks; 0: off [s].
+        every: seconds of a robot's sets between checks; 0: off (and 0 with a filter whose
+            observations are not stereo points) [s].
         window: seconds of the robot's recent sets aligned together [s]. 3 s, not 2: after a
             blind turn a robot meets few old landmarks a set, and a longer window gathers the
             inliers a fit needs (closed loop, seeds 14-39: robots above 0.10 m 2 -> 1 of 78,
@@ -95,6 +96,16 @@ class CentralConfig:
         odom_buffer: odometry poses kept per robot for interpolation.
         max_wait: longest a set waits for the other robots' sets of the same time [s].
         max_queue: observation sets held at most; beyond it the oldest is dropped and counted.
+        team_step: 0: every set is one filter step, after which the filter resamples if its
+            weights have degenerated. > 0: the sets whose stamps fall in one window
+            (n−1)·team_step < stamp ≤ n·team_step (stamps from 0) wait until every active robot
+            has delivered a set at or after the window's end (or ``max_wait``) and are ONE filter
+            step, so the filter decides on resampling once per window whatever the number of sets
+            and robots in it: a resampling that one robot's weights call for draws the other
+            robots' poses too, at random with respect to their own measurements, and each one
+            thins out their particles (a robot nobody measures keeps the spread it needs to be
+            found again only as long as that is rare). Each robot's pose is then reported once a
+            window, at its last set [s].
         unknown_start: robots whose start pose is unknown (their ``start_poses`` entries are not
             used); if every robot is listed, the first one's start pose defines the map frame.
         merge_every: updates of a robot with an unknown start between attempts to align its map.
@@ -108,7 +119,8 @@ class CentralConfig:
             a link down, a frontend restarted) is placed by its observations instead of by its
             odometry over the gap: its observation set is aligned to the best particle's map
             (descriptor matches, RANSAC and least squares, ``fusion`` thresholds) and its
-            particles drawn from the fit (stereo points only); 0: never [s].
+            particles drawn from the fit (stereo points: 0 with another observation model);
+            0: never [s].
         relocalize_tries: attempts, one a second, before a robot back from a gap is left to
             its odometry (a frame whose matches are bunched up cannot fix the rotation); its
             sets in between move it by odometry only and are counted, not mapped.
@@ -137,6 +149,7 @@ class CentralConfig:
     odom_buffer: int = 2000
     max_wait: float = 1.0
     max_queue: int = 200
+    team_step: float = 0.0
     unknown_start: tuple[str, ...] = ()
     merge_every: int = 10
     sample_gap: float = 1.0

@@ -35,6 +35,12 @@ class Corrections:
         robots: robot names.
         drops: the mapper's drop counter (by reason), counted into.
 
+    Raises:
+        ValueError: the gap re-localisation (``relocalize_after``) or the map check
+            (``map_check.every``) on with a filter whose observations are not 3D points (they
+            align stereo points; a profile of another sensor switches them off, as
+            config/mrclam.yaml does).
+
     Attributes:
         relocalizations: every re-localisation after a gap (cause "gap": robot, stamp_ns, gap_s,
             travelled_m, accepted, reason, inliers, shift_m) and every move by a map check
@@ -45,6 +51,9 @@ class Corrections:
     """
 
     def __init__(self, cfg: CentralConfig, robots: list[str], drops: Counter[str]):
+        if cfg.filter.observation_model != "stereo_point" and (cfg.relocalize_after > 0 or cfg.map_check.every > 0):
+            raise ValueError(f"relocalize_after and map_check.every align stereo points: set both to 0 with "
+                             f"filter.observation_model {cfg.filter.observation_model}")
         self.cfg = cfg
         self.robots = robots
         self.drops = drops
@@ -114,8 +123,7 @@ class Corrections:
             seen = previous_ns
         gap = (obs.stamp_ns - seen) * 1e-9
         tried = self._reloc_tried.get(obs.robot, seen)
-        relocalizing = (filt is slam and 0 < cfg.relocalize_after < gap
-                        and cfg.filter.observation_model == "stereo_point")
+        relocalizing = filt is slam and 0 < cfg.relocalize_after < gap
         if relocalizing and len(obs) < cfg.fusion.min_inliers and obs.robot not in self._returning:
             # back from silence with too few points to place it (a frontend's tracks start again
             # after a gap): the gap stays open until a set can be aligned, and its sets wait
@@ -188,7 +196,7 @@ class Corrections:
         due, align those sets to the older map and move the robot if the map disagrees
         (:class:`MapCheckConfig`)."""
         mc = self.cfg.map_check
-        if mc.every <= 0 or self.cfg.filter.observation_model != "stereo_point":
+        if mc.every <= 0:
             return
         k = slam.index[obs.robot]
         est = slam.estimate().mean[k]

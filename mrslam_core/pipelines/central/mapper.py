@@ -1,10 +1,11 @@
-"""The central mapper: the parts composed into one update per observation set, and checkpoints.
+"""The central mapper: the parts composed into one update per team step, and checkpoints.
 
-An update takes a set the :class:`~.ordering.Ordering` released with its odometry, gives it to
-the filter that maps its robot (:class:`~.lifecycle.Lifecycle`: the central one, or the robot's
-local one before its merge), with the :class:`~.corrections.Corrections` before and after the
-filter step, and records the robot's pose. A checkpoint is the central filter plus each part's
-state.
+An update takes the sets the :class:`~.ordering.Ordering` released as one team step (one set, or
+with ``team_step`` the sets of one window) with their odometry, gives each to the filter that
+maps its robot (:class:`~.lifecycle.Lifecycle`: the central one, or the robot's local one before
+its merge) with its sightings of other robots, with the :class:`~.corrections.Corrections` before
+and after the filter step, and records each robot's pose. A checkpoint is the central filter plus
+each part's state.
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ from mrslam_core.pipelines.central.corrections import Corrections
 from mrslam_core.pipelines.central.lifecycle import Lifecycle
 from mrslam_core.pipelines.central.ordering import Ordering
 from mrslam_core.slam.filter import FilterInputError, MultiRobotFastSLAM, RobotUpdate
-from mrslam_core.types import ObservationSet
+from mrslam_core.types import ObservationSet, RobotSighting
 
 #: the parts of a checkpoint's mapper state, each under its name (``mapper``: the mapper's own)
 PARTS = ("mapper", "ordering", "lifecycle", "corrections")
@@ -133,57 +134,92 @@ class CentralMapper:
         return True
 
     def add_observations(self, obs: ObservationSet) -> bool:
-        """Queue an observation set (base_link of ``obs.robot``); False if dropped."""
+        """Queue an observation set (base_link of ``obs.robot``), with its sightings of other
+        robots (scored in the weights of the filter that maps both); False if dropped."""
         return self.ordering.add_observations(obs)
 
     # ------------------------------------------------------------------ processing
     def process(self, flush: bool = False, budget_s: float | None = None, max_sets: int | None = None) -> list[Processed]:
         """Run the filter on every set that is due (all of them with ``flush``), in stamp order,
-        or only for about ``budget_s`` wall seconds or ``max_sets`` sets (the rest stays queued)."""
+        or only for about ``budget_s`` wall seconds or ``max_sets`` sets (the rest stays queued;
+        with ``team_step``, whole windows)."""
         done: list[Processed] = []
         until = None if budget_s is None else time.perf_counter() + budget_s
 
         def more() -> bool:
             return (until is None or time.perf_counter() < until) and (max_sets is None or len(done) < max_sets)
 
-        for obs in self.ordering.release(flush, more):
-            result = self._update(obs)
-            if result is not None:
-                done.append(result)
+        for sets in self.ordering.release(flush, more):
+            done += self._update(sets)
         return done
 
-    def _update(self, obs: ObservationSet) -> Processed | None:
-        pairing = self.ordering.pair(obs)
-        if pairing is None:
-            return None
-        odom = pairing.odom
-        filt = self.lifecycle.local.get(obs.robot, self.slam)
+    def _update(self, sets: list[ObservationSet]) -> list[Processed]:
+        """One team step: ``sets`` (in stamp order) paired, corrected and given to the filters
+        that map their robots in one step each (one resampling decision); the robots' poses
+        after it, at each robot's last set."""
         t0 = time.perf_counter()
-        motion = self.corrections.before_step(self.slam, filt, obs, pairing, self.ordering.path_length)
-        held = self.corrections.hold(obs)
-        try:
-            filt.step([RobotUpdate(obs.robot, obs.stamp_ns, motion, None if held else obs)])
-        except FilterInputError:
-            self.drops["bad_observations"] += 1
-            return None
-        if filt is self.slam and not held:
-            self.corrections.after_step(self.slam, obs, odom)
+        steps: dict[int, tuple[MultiRobotFastSLAM, list[RobotUpdate]]] = {}
+        made: list[tuple[ObservationSet, MultiRobotFastSLAM, np.ndarray, bool]] = []
+        before = dict(self.ordering.last)
+        for obs in sets:
+            pairing = self.ordering.pair(obs)
+            if pairing is None:
+                continue
+            filt = self.lifecycle.local.get(obs.robot, self.slam)
+            motion = self.corrections.before_step(self.slam, filt, obs, pairing, self.ordering.path_length)
+            held = self.corrections.hold(obs)
+            sightings = () if held else self._sightings(filt, obs)
+            steps.setdefault(id(filt), (filt, []))[1].append(
+                RobotUpdate(obs.robot, obs.stamp_ns, motion, None if held else obs, sightings))
+            self.ordering.last[obs.robot] = (obs.stamp_ns, pairing.odom)
+            made.append((obs, filt, pairing.odom, held))
+        failed: set[int] = set()
+        for key, (filt, updates) in steps.items():
+            try:
+                filt.step(updates)
+            except FilterInputError:
+                failed.add(key)
         ms = (time.perf_counter() - t0) * 1e3
         self.update_ms.append(ms)
-        self.ordering.last[obs.robot] = (obs.stamp_ns, odom)
-        if filt is not self.slam:
-            self.lifecycle.updated(self.slam, obs.robot, obs.stamp_ns)
+        last = {}  # robot -> stamp of its last set of this step
+        for obs, filt, odom, held in made:
+            if id(filt) in failed:
+                self.drops["bad_observations"] += 1
+                if obs.robot in before:  # the motion stays to be applied with its next set
+                    self.ordering.last[obs.robot] = before[obs.robot]
+                else:
+                    self.ordering.last.pop(obs.robot, None)
+                continue
+            if filt is self.slam and not held:
+                self.corrections.after_step(self.slam, obs, odom)
+            elif filt is not self.slam:
+                self.lifecycle.updated(self.slam, obs.robot, obs.stamp_ns)
+            last[obs.robot] = obs.stamp_ns
+        done = []
+        for obs, _, odom, held in made:
+            if last.get(obs.robot) != obs.stamp_ns:
+                continue  # its step failed, or the robot has a later set in this step (its pose is there)
             filt = self.lifecycle.local.get(obs.robot, self.slam)
-        est = filt.estimate()
-        k = filt.index[obs.robot]
-        if filt is self.slam:
-            self.trajectory[obs.robot].append((obs.stamp_ns, est.mean[k].copy()))
-            if held:
-                self.held[obs.robot].add(obs.stamp_ns)
-        # a robot back from silence and not placed again has no map pose yet, as an unknown-start
-        # robot before its merge: its dead-reckoned pose is neither published nor reported
-        merged = filt is self.slam and not held
-        return Processed(obs.robot, obs.stamp_ns, est.mean[k].copy(), est.cov[k].copy(), odom, ms, merged)
+            est = filt.estimate()
+            k = filt.index[obs.robot]
+            if filt is self.slam:
+                self.trajectory[obs.robot].append((obs.stamp_ns, est.mean[k].copy()))
+                if held:
+                    self.held[obs.robot].add(obs.stamp_ns)
+            # a robot back from silence and not placed again has no map pose yet, as an unknown-start
+            # robot before its merge: its dead-reckoned pose is neither published nor reported
+            merged = filt is self.slam and not held
+            done.append(Processed(obs.robot, obs.stamp_ns, est.mean[k].copy(), est.cov[k].copy(), odom, ms, merged))
+        return done
+
+    def _sightings(self, filt: MultiRobotFastSLAM, obs: ObservationSet) -> tuple[RobotSighting, ...]:
+        """The sightings of ``obs`` that ``filt`` can score: of robots it holds (a robot not merged
+        yet, or measured by one, is in no common frame with the other; counted as
+        ``unmapped_sighting``)."""
+        kept = tuple(s for s in obs.sightings if s.target in filt.index)
+        if len(kept) < len(obs.sightings):
+            self.drops["unmapped_sighting"] += len(obs.sightings) - len(kept)
+        return kept
 
     # ------------------------------------------------------------------ results
     def trajectories(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:

@@ -5,25 +5,52 @@ Observation sets wait in a queue and are released in stamp order once every *act
 or never heard from within ``max_wait`` of the team's first set) has delivered a set at least as
 new, or once the set is ``max_wait`` older than the newest observation stamp (a late or silent
 robot delays the team by at most ``max_wait``; odometry does not advance this clock, so
-frontends that lag behind the odometry do not reorder anything). A released set is paired with
-the robot's odometry interpolated at its stamp; the motion since the robot's previous update is
-the filter's odometry input. Everything that cannot be used is counted in the mapper's drops.
+frontends that lag behind the odometry do not reorder anything). With ``team_step`` the sets of
+one window of stamps are released together, once every active robot has delivered a set at or
+after the window's end (or the end is ``max_wait`` old): one filter step. A released set is
+paired with the robot's odometry interpolated at its stamp; the motion since the robot's previous
+update is the filter's odometry input. Everything that cannot be used is counted in the mapper's
+drops.
 """
 
 from __future__ import annotations
 
+import bisect
 import heapq
 from collections import Counter, deque
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
+from operator import itemgetter
 from typing import Any
 
 import numpy as np
 
-from mrslam_core.evaluation.metrics import interpolate_poses
+from mrslam_core.geometry.se2 import wrap_angle
 from mrslam_core.pipelines.central.config import CentralConfig
 from mrslam_core.pipelines.central.state import set_from_state, sets_state
 from mrslam_core.types import ObservationSet
+
+
+Odometry = Sequence[tuple[int, np.ndarray]]
+"""A robot's buffered odometry: (stamp [ns], pose (3,) [m, rad]) in stamp order."""
+
+
+def interpolate_odometry(buf: Odometry, stamp_ns: int) -> np.ndarray:
+    """The pose (3,) of ``buf`` (not empty) at ``stamp_ns``: linear between the poses around it
+    (θ along the shorter way, wrapped), the first or last pose outside their span. A binary
+    search: the cost does not grow with the buffer."""
+    i = bisect.bisect_left(buf, stamp_ns, key=itemgetter(0))
+    if i == len(buf):
+        return buf[-1][1].copy()
+    if i == 0 or buf[i][0] == stamp_ns:
+        out = buf[i][1].copy()
+    else:
+        (ta, a), (tb, b) = buf[i - 1], buf[i]
+        f = (stamp_ns - ta) / (tb - ta)
+        out = a + f * (b - a)
+        out[2] = a[2] + f * wrap_angle(b[2] - a[2])
+    out[2] = wrap_angle(out[2])
+    return out
 
 
 @dataclass(frozen=True)
@@ -36,30 +63,29 @@ class Pairing:
             update, or where its odometry started (at its start pose) before its first.
         previous_ns: stamp of the robot's previous update [ns]; None before its first.
         since_ns: stamp of the oldest buffered odometry pose [ns].
-        stamps: (N,) the buffered odometry stamps [ns, as float].
-        poses: (N, 3) the buffered odometry poses [m, rad].
+        buffer: the robot's buffered odometry when the set was paired (read before more
+            odometry arrives).
     """
 
     odom: np.ndarray
     reference: np.ndarray
     previous_ns: int | None
     since_ns: int
-    stamps: np.ndarray
-    poses: np.ndarray
+    buffer: Odometry
 
     def at(self, stamp_ns: int) -> np.ndarray | None:
         """The odometry pose (3,) interpolated at ``stamp_ns``; None at or before the oldest
         buffered pose."""
         if stamp_ns <= self.since_ns:
             return None
-        return interpolate_poses(np.array([float(stamp_ns)]), self.stamps, self.poses)[0]
+        return interpolate_odometry(self.buffer, stamp_ns)
 
 
 class Ordering:
     """The queue of observation sets, the odometry buffers and each robot's last update.
 
     Args:
-        cfg: ``max_wait``, ``max_queue``, ``odom_buffer`` and ``max_odom_gap`` apply.
+        cfg: ``max_wait``, ``max_queue``, ``odom_buffer``, ``max_odom_gap`` and ``team_step`` apply.
         robots: robot names; their order breaks ties between sets of one stamp.
         drops: the mapper's drop counter (by reason), counted into.
 
@@ -82,6 +108,9 @@ class Ordering:
         self._latest_obs: dict[str, int] = {}
         self._first_ns: int | None = None
         self._wait_ns = int(cfg.max_wait * 1e9)
+        if cfg.team_step < 0:
+            raise ValueError("team_step must be >= 0")
+        self._step_ns = int(round(cfg.team_step * 1e9))
 
     # ------------------------------------------------------------------ odometry
     def check_odometry(self, robot: str, stamp_ns: int, pose: np.ndarray) -> np.ndarray | None:
@@ -117,8 +146,7 @@ class Ordering:
             return None
         if stamp_ns >= buf[-1][0]:
             return buf[-1][1]
-        t = np.fromiter((s for s, _ in buf), float, len(buf))
-        return interpolate_poses(np.array([float(stamp_ns)]), t, np.array([p for _, p in buf]))[0]
+        return interpolate_odometry(buf, stamp_ns)
 
     def path_length(self, robot: str, t0: int, t1: int) -> float:
         """Distance the odometry of ``robot`` covered between stamps ``t0`` and ``t1`` [m]."""
@@ -162,11 +190,20 @@ class Ordering:
         """Observation sets waiting."""
         return len(self._queue)
 
-    def release(self, flush: bool, more: Callable[[], bool]) -> Iterator[ObservationSet]:
-        """The sets that are due (all of them with ``flush``), in stamp order, each taken off the
-        queue before it is yielded, while ``more()``; a due set whose robot has no odometry at its
-        stamp is dropped (counted)."""
+    def release(self, flush: bool, more: Callable[[], bool]) -> Iterator[list[ObservationSet]]:
+        """The sets that are due (all of them with ``flush``), in stamp order, as team steps, each
+        taken off the queue before it is yielded, while ``more()``; a due set whose robot has no
+        odometry at its stamp is dropped (counted). A team step is one set, or with ``team_step``
+        every set of one window of stamps, due once every active robot has delivered a set at or
+        after the window's end (or the end is ``max_wait`` older than the newest set)."""
         while self._queue and more():
+            if self._step_ns:
+                window = self._due_window(flush)
+                if window is None:
+                    return
+                if window:
+                    yield window
+                continue
             stamp, _, _, obs = self._queue[0]
             overdue = flush or self.now_ns - stamp > self._wait_ns
             if not overdue and not self._others_caught_up(obs.robot, stamp):
@@ -179,13 +216,34 @@ class Ordering:
                 self.drops["no_odometry_at_stamp"] += 1
                 continue
             self._pop()
-            yield obs
+            yield [obs]
+
+    def _due_window(self, flush: bool) -> list[ObservationSet] | None:
+        """The sets of the oldest queued set's ``team_step`` window (n−1)·step < stamp ≤ n·step,
+        taken off the queue, if they are due; None if they must wait."""
+        end = -(-self._queue[0][0] // self._step_ns) * self._step_ns
+        overdue = flush or self.now_ns - end > self._wait_ns
+        if not overdue and not self._others_caught_up(None, end):
+            return None
+        window = sorted(e for e in self._queue if e[0] <= end)
+        unpaired = [e for e in window if not self._odom[e[3].robot] or self._odom[e[3].robot][-1][0] < e[0]]
+        if unpaired and not overdue:
+            return None  # odometry still on the way
+        self._queue = [e for e in self._queue if e[0] > end]
+        heapq.heapify(self._queue)
+        for stamp, _, _, obs in window:
+            self._queued.discard((obs.robot, stamp))
+        if unpaired:
+            self.drops["no_odometry_at_stamp"] += len(unpaired)
+        return [e[3] for e in window if not any(e is u for u in unpaired)]
 
     def _pop(self) -> None:
         stamp, _, _, obs = heapq.heappop(self._queue)
         self._queued.discard((obs.robot, stamp))
 
-    def _others_caught_up(self, robot: str, stamp: int) -> bool:
+    def _others_caught_up(self, robot: str | None, stamp: int) -> bool:
+        """True if every active robot but ``robot`` (None: every active robot) has delivered a set
+        at ``stamp`` or later."""
         for other in self.robots:
             # a robot not heard from yet is waited for from the team's first set on
             latest = self._latest_obs.get(other, self._first_ns - 1)
@@ -202,16 +260,15 @@ class Ordering:
         if obs.stamp_ns < buf[0][0]:
             self.drops["no_odometry_at_stamp"] += 1
             return None
-        t = np.fromiter((s for s, _ in buf), float, len(buf))
-        i = int(np.searchsorted(t, obs.stamp_ns))
-        if 0 < i < len(t) and t[i] != obs.stamp_ns and (t[i] - t[i - 1]) * 1e-9 > self.cfg.max_odom_gap:
+        i = bisect.bisect_left(buf, obs.stamp_ns, key=itemgetter(0))
+        if (0 < i < len(buf) and buf[i][0] != obs.stamp_ns
+                and (buf[i][0] - buf[i - 1][0]) * 1e-9 > self.cfg.max_odom_gap):
             self.drops["odometry_gap"] += 1
             return None
-        poses = np.array([p for _, p in buf])
-        odom = interpolate_poses(np.array([float(obs.stamp_ns)]), t, poses)[0]
+        odom = interpolate_odometry(buf, obs.stamp_ns)
         prev = self.last.get(obs.robot)
         reference = buf[0][1] if prev is None else prev[1]
-        return Pairing(odom, reference, None if prev is None else prev[0], buf[0][0], t, poses)
+        return Pairing(odom, reference, None if prev is None else prev[0], buf[0][0], buf)
 
     # ------------------------------------------------------------------ checkpoint
     def state(self) -> dict[str, Any]:
