@@ -16,6 +16,29 @@ import numpy as np
 from numba import njit
 
 
+@njit(cache=True, inline="always")
+def _sym3_inverse(p, q, sx, d, e, f):
+    """The inverse's six terms (a00, a01, a02, a11, a12, a22) and the determinant of the symmetric
+    3×3 [[p, q, sx], [q, d, e], [sx, e, f]], from the adjugate."""
+    c00 = d * f - e * e
+    c01 = sx * e - q * f
+    c02 = q * e - sx * d
+    c11 = p * f - sx * sx
+    c12 = q * sx - p * e
+    c22 = p * d - q * q
+    dt = p * c00 + q * c01 + sx * c02
+    inv = 1.0 / dt
+    return c00 * inv, c01 * inv, c02 * inv, c11 * inv, c12 * inv, c22 * inv, dt
+
+
+@njit(cache=True, inline="always")
+def _rotated(ci, si, rxx, rxy, rxz, ryy, ryz):
+    """The terms (xx, yy, xy, xz, yz) of Rz R Rzᵀ that the rotation changes (zz is R's)."""
+    cc, ss, cs = ci * ci, si * si, ci * si
+    return (cc * rxx - 2 * cs * rxy + ss * ryy, ss * rxx + 2 * cs * rxy + cc * ryy,
+            cs * (rxx - ryy) + (cc - ss) * rxy, ci * rxz - si * ryz, si * rxz + ci * ryz)
+
+
 @njit(cache=True)
 def observation_terms(pose, c, s, z, r, lm, rn):
     """What the gate needs per particle and observation: the observation in the map frame
@@ -118,22 +141,9 @@ def kalman(pose, c, s, z, r, pi, bi, mean, cov, rows, new_mu, new_sig, maha, det
         x = pose[p, 0] + ci * zx - si * zy - mx
         y = pose[p, 1] + si * zx + ci * zy - my
         zz = z[b, 2] - mz
-        cc, ss, cs = ci * ci, si * si, ci * si
-        p = s00 + (cc * rxx - 2 * cs * rxy + ss * ryy)
-        d = s11 + (ss * rxx + 2 * cs * rxy + cc * ryy)
-        q = s01 + (cs * (rxx - ryy) + (cc - ss) * rxy)
-        sx = s02 + (ci * rxz - si * ryz)
-        e = s12 + (si * rxz + ci * ryz)
-        f = s22 + rzz
-        c00 = d * f - e * e
-        c01 = sx * e - q * f
-        c02 = q * e - sx * d
-        c11 = p * f - sx * sx
-        c12 = q * sx - p * e
-        c22 = p * d - q * q
-        dt = p * c00 + q * c01 + sx * c02
-        inv = 1.0 / dt
-        a00, a01, a02, a11, a12, a22 = c00 * inv, c01 * inv, c02 * inv, c11 * inv, c12 * inv, c22 * inv
+        rot_xx, rot_yy, rot_xy, rot_xz, rot_yz = _rotated(ci, si, rxx, rxy, rxz, ryy, ryz)
+        a00, a01, a02, a11, a12, a22, dt = _sym3_inverse(s00 + rot_xx, s01 + rot_xy, s02 + rot_xz, s11 + rot_yy,
+                                                         s12 + rot_yz, s22 + rzz)
         t00 = s00 * a00 + s01 * a01 + s02 * a02
         t01 = s00 * a01 + s01 * a11 + s02 * a12
         t02 = s00 * a02 + s01 * a12 + s02 * a22
@@ -178,22 +188,10 @@ def proposal_terms(x, dx, c, s, z, r, pi, bi, mean, cov, rows, info, eta, quad, 
         mx, my, mz = np.float64(mean[row, 0]), np.float64(mean[row, 1]), np.float64(mean[row, 2])
         rxx, rxy, rxz = r[b, 0, 0], r[b, 0, 1], r[b, 0, 2]
         ryy, ryz = r[b, 1, 1], r[b, 1, 2]
-        cc, ss, cs = ci * ci, si * si, ci * si
-        p00 = cov[row, 0] + (cc * rxx - 2 * cs * rxy + ss * ryy)
-        d = cov[row, 4] + (ss * rxx + 2 * cs * rxy + cc * ryy)
-        q = cov[row, 1] + (cs * (rxx - ryy) + (cc - ss) * rxy)
-        sx = cov[row, 2] + (ci * rxz - si * ryz)
-        e = cov[row, 5] + (si * rxz + ci * ryz)
-        f = cov[row, 8] + r[b, 2, 2]
-        c00 = d * f - e * e
-        c01 = sx * e - q * f
-        c02 = q * e - sx * d
-        c11 = p00 * f - sx * sx
-        c12 = q * sx - p00 * e
-        c22 = p00 * d - q * q
-        dt = p00 * c00 + q * c01 + sx * c02
-        inv = 1.0 / dt
-        a00, a01, a02, a11, a12, a22 = c00 * inv, c01 * inv, c02 * inv, c11 * inv, c12 * inv, c22 * inv
+        rot_xx, rot_yy, rot_xy, rot_xz, rot_yz = _rotated(ci, si, rxx, rxy, rxz, ryy, ryz)
+        a00, a01, a02, a11, a12, a22, dt = _sym3_inverse(
+            cov[row, 0] + rot_xx, cov[row, 1] + rot_xy, cov[row, 2] + rot_xz, cov[row, 4] + rot_yy,
+            cov[row, 5] + rot_yz, cov[row, 8] + r[b, 2, 2])
         ddx = mx - x[p, 0]
         ddy = my - x[p, 1]
         # ν = g⁻¹(x, z) − μ + Hₓ dx
