@@ -53,9 +53,11 @@ def test_live_replay_with_a_looping_bag_matches_offline(offline, tmp_path):
         launcher.start()
         topics = [f"/{r}/{k}" for r in cfg.robots for k in ("odom", "observations")]
         # the delay lets every subscription learn of the player's publishers (DDS discovery is
-        # two-sided): a lost first odometry message would drop the sets before the next one
+        # two-sided: the player sees the node's subscriptions before the node has matched its
+        # publishers, and what is sent in between is lost). 1 s was too short once on a loaded
+        # CI machine: the first 1.9 s of the 4x replay (7.4 s of the bag) never reached the node.
         player = BagPlayer(node, RECORDING / "bag", rate=4.0, loop=True, topics=topics,
-                           wait_for_subscribers=30.0, start_delay=1.0)
+                           wait_for_subscribers=30.0, start_delay=5.0)
         thread = threading.Thread(target=player.run, kwargs={"max_loops": 2})
         thread.start()
         thread.join(timeout=120)
