@@ -225,3 +225,24 @@ def test_held_slots_is_the_union_over_particles():
     store.copy_rows(np.array([4, 5]), np.array([0, 0]))
     (ex,) = store.gather(np.arange(6)[:, None], slots[None], ("exists",))
     np.testing.assert_array_equal(store.held(), ex.any(axis=0))
+
+
+
+@pytest.mark.parametrize("kind", ["default", "team", "mrclam"])
+def test_warm_up_loads_every_kernel_a_filter_steps(kind):
+    """After the warm-up, the filter's steps call no kernel for the first time: a second warm-up
+    with another number of landmarks (same types) adds no signature to any dispatcher."""
+    from mrslam_core.pipelines.mrclam import MrclamConfig
+    from mrslam_core.pipelines.team import TeamConfig
+    from mrslam_core.slam import association_kernels, proposal_kernels, store_kernels
+    from mrslam_core.slam.config import FilterConfig
+    from mrslam_core.slam.warmup import warm_up
+
+    cfg = {"default": FilterConfig, "team": lambda: TeamConfig().filter, "mrclam": lambda: MrclamConfig().filter}[kind]()
+    assert warm_up(cfg) > 0
+    dispatchers = [getattr(m, n) for m in (association_kernels, proposal_kernels, stereo_kernels, store_kernels)
+                   for n in dir(m) if hasattr(getattr(m, n), "signatures")]
+    before = {d.__name__: len(d.signatures) for d in dispatchers}
+    assert sum(before.values()) > 0
+    warm_up(cfg, landmarks=7)
+    assert {d.__name__: len(d.signatures) for d in dispatchers} == before
