@@ -3,6 +3,8 @@ offline into the core, and live into a central node process, with the bag loopin
 back): both give the same trajectories, and the loop's stale data is counted, not used."""
 
 import json
+import subprocess
+import sys
 import threading
 from pathlib import Path
 
@@ -16,10 +18,14 @@ RECORDING = Path(__file__).resolve().parents[2] / "bags" / "sim2_small"
 
 @pytest.fixture(scope="module")
 def offline(tmp_path_factory):
-    from mrslam_ros import replay_offline
-
+    # in a process of its own, as the live node runs and as a user runs it: replayed inside the
+    # pytest process after the rest of the suite, the offline estimate left a fresh process's
+    # from the second pose (5.8e-8 m, growing to 0.11 m through resampling); which earlier test
+    # leaves that state behind is not traced yet (docs/results.md, "Filter speed")
     out = tmp_path_factory.mktemp("offline")
-    assert replay_offline.main([str(RECORDING / "bag"), "--offline", "--quiet", "--out", str(out)]) == 0
+    proc = subprocess.run([str(Path(sys.executable).parent / "mrslam"), "replay", str(RECORDING / "bag"), "--offline",
+                           "--quiet", "--out", str(out)], capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
     return out, json.loads((out / "report.json").read_text())
 
 
