@@ -51,7 +51,6 @@ def observation_terms(pose, c, s, z, r, lm, rn):
         lm: (M, B, 3) and rn: (M, B, 6) outputs, map frame.
     """
     for p in range(c.size):
-        cc, ss, cs = c[p] * c[p], s[p] * s[p], c[p] * s[p]
         pr = p if r.shape[0] > 1 else 0
         pz = p if z.shape[0] > 1 else 0
         for b in range(r.shape[1]):
@@ -61,12 +60,9 @@ def observation_terms(pose, c, s, z, r, lm, rn):
             lm[p, b, 2] = z[pz, b, 2]
             rxx, rxy, rxz = r[pr, b, 0, 0], r[pr, b, 0, 1], r[pr, b, 0, 2]
             ryy, ryz = r[pr, b, 1, 1], r[pr, b, 1, 2]
-            rn[p, b, 0] = cc * rxx - 2 * cs * rxy + ss * ryy
-            rn[p, b, 1] = cs * (rxx - ryy) + (cc - ss) * rxy
-            rn[p, b, 2] = c[p] * rxz - s[p] * ryz
-            rn[p, b, 3] = ss * rxx + 2 * cs * rxy + cc * ryy
-            rn[p, b, 4] = s[p] * rxz + c[p] * ryz
-            rn[p, b, 5] = r[pr, b, 2, 2]
+            xx, yy, xy, xz, yz = _rotated(c[p], s[p], rxx, rxy, rxz, ryy, ryz)
+            rn[p, b, 0], rn[p, b, 1], rn[p, b, 2] = xx, xy, xz
+            rn[p, b, 3], rn[p, b, 4], rn[p, b, 5] = yy, yz, r[pr, b, 2, 2]
 
 
 @njit(cache=True)
