@@ -18,7 +18,6 @@ from typing import Any
 
 import numpy as np
 
-from mrslam_core.geometry.se2 import between, compose
 from mrslam_core.pipelines.central.config import CentralConfig
 from mrslam_core.pipelines.central.corrections import Corrections
 from mrslam_core.pipelines.central.lifecycle import Lifecycle
