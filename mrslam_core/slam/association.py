@@ -18,6 +18,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
+from mrslam_core.slam.association_kernels import cheapest
+
 _BIG = 1e12
 
 
@@ -30,21 +32,15 @@ def associate_ml(
         cost: (M, V) cost of each pair, inf where infeasible (lower is better).
         vb, vc: (V,) observation index and candidate column of each pair.
         num_obs: B.
-        width: C, candidate columns per observation.
+        width: C, candidate columns per observation (vc < C).
 
     Returns:
         pair (M, B), −1 where no pair is feasible; conflicts (one slot chosen by two
         observations of one particle) are NOT resolved here, see :func:`resolve_conflicts`.
     """
-    m = cost.shape[0]
-    full = np.full((m, num_obs, width), np.inf)
-    full[:, vb, vc] = cost
-    col = full.argmin(axis=2)
-    best = np.take_along_axis(full, col[..., None], 2)[..., 0]
-    lookup = np.full((num_obs, width), -1, np.int64)
-    lookup[vb, vc] = np.arange(vb.size)
-    pair = lookup[np.arange(num_obs)[None, :], col]
-    pair[~np.isfinite(best)] = -1
+    pair = np.full((cost.shape[0], num_obs), -1, np.int64)
+    cheapest(np.ascontiguousarray(cost, float), np.ascontiguousarray(vb, np.int64),
+             np.ascontiguousarray(vc, np.int64), pair)
     return pair
 
 

@@ -43,3 +43,67 @@ def ml_cost(maha, held, confirmed, ev, gate, weight, trust_gate, track_slot, vsl
             if use_track and h and vslots[v] == track_slot[m, vb[v]] and d <= track_gate:
                 c = -1.0
             cost[m, v] = c
+
+
+@njit(cache=True)
+def cheapest(cost, vb, vc, pair):
+    """Per particle and observation the pair of least cost, as ``argmin`` over the observation's
+    candidate columns picks it: the lowest column among equal costs; −1 where the least cost is
+    not finite or a cost is NaN (argmin's NaN wins and fails the finiteness test).
+
+    Args:
+        cost: (M, V) cost of each pair; vb, vc: (V,) its observation and candidate column
+            (distinct pairs).
+        pair: (M, B) output, −1 on entry.
+    """
+    num_obs = pair.shape[1]
+    best = np.empty(num_obs)
+    col = np.empty(num_obs, np.int64)
+    nan = np.empty(num_obs, np.bool_)
+    for m in range(cost.shape[0]):
+        best[:] = np.inf
+        col[:] = -1
+        nan[:] = False
+        for v in range(cost.shape[1]):
+            c = cost[m, v]
+            b = vb[v]
+            if c != c:
+                nan[b] = True
+            elif c < best[b] or (c == best[b] and vc[v] < col[b]):
+                best[b] = c
+                col[b] = vc[v]
+                pair[m, b] = v
+        for b in range(num_obs):
+            if nan[b] or not np.isfinite(best[b]):
+                pair[m, b] = -1
+
+
+@njit(cache=True)
+def chosen(pair, vslots, confirmed, rows):
+    """The associated (particle, observation) pairs of ``pair`` (M, B) (≥ 0: the chosen pair v),
+    in row-major order as ``np.nonzero`` lists them, with what the update needs of each.
+
+    Args:
+        vslots: (V,) slot of pair v; confirmed: (M, V) bool; rows: (M, V) pool row of each pair.
+
+    Returns:
+        (particle, observation, slot, confirmed, pool row), each (P,).
+    """
+    n = 0
+    for m in range(pair.shape[0]):
+        for b in range(pair.shape[1]):
+            n += pair[m, b] >= 0
+    mi, bi = np.empty(n, np.int64), np.empty(n, np.int64)
+    slots, read = np.empty(n, np.int64), np.empty(n, np.int64)
+    conf = np.empty(n, np.bool_)
+    i = 0
+    for m in range(pair.shape[0]):
+        for b in range(pair.shape[1]):
+            v = pair[m, b]
+            if v >= 0:
+                mi[i], bi[i] = m, b
+                slots[i] = vslots[v]
+                conf[i] = confirmed[m, v]
+                read[i] = rows[m, v]
+                i += 1
+    return mi, bi, slots, conf, read

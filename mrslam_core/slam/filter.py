@@ -25,12 +25,12 @@ from scipy.stats import chi2
 from mrslam_core.geometry.se2 import wrap_angle
 from mrslam_core.linalg import is_positive_definite, quad_form, sym_inv_det
 from mrslam_core.slam.association import associate_hungarian, associate_ml, resolve_conflicts
-from mrslam_core.slam.association_kernels import ml_cost
+from mrslam_core.slam.association_kernels import chosen, ml_cost
 from mrslam_core.slam.config import FilterConfig
 from mrslam_core.slam.landmarks import LandmarkStore
 from mrslam_core.slam.models import ObservationModel, RangeBearingModel, make_model
 from mrslam_core.slam.motion import predict_motion, sample_motion
-from mrslam_core.slam.proposal_kernels import sum_by
+from mrslam_core.slam.proposal_kernels import sum_terms
 from mrslam_core.slam.resampling import (
     copy_plan,
     effective_sample_fraction,
@@ -404,14 +404,16 @@ class MultiRobotFastSLAM:
 
         assoc = pair >= 0
         rejected = np.zeros_like(assoc)
-        mi, bi = np.nonzero(assoc)
+        mi = bi = np.zeros(0, np.int64)
+        if vb.size:
+            # read: the landmarks' rows before the write (shared: in cache)
+            mi, bi, slots, conf, read = chosen(
+                pair, np.ascontiguousarray(vslots, np.int64), np.ascontiguousarray(confirmed), rows
+            )
         if mi.size:
-            pv = pair[mi, bi]
-            slots = vslots[pv]
-            conf = confirmed[mi, pv]
             if motion_cov is not None:
                 poses, usable, inlier = self._sample_proposal(
-                    k, mi[conf], bi[conf], z, r, rows[mi[conf], pv[conf]], motion_cov, log_l
+                    k, mi[conf], bi[conf], z, r, read[conf], motion_cov, log_l
                 )
                 if not usable:  # a lost robot's observations that cannot re-localise it
                     return 0, 0
@@ -422,8 +424,7 @@ class MultiRobotFastSLAM:
                     self.outlier_pairs += out.size
                     keep = np.ones(mi.size, bool)
                     keep[out] = False
-                    mi, bi, pv, slots, conf = (a[keep] for a in (mi, bi, pv, slots, conf))
-            read = rows[mi, pv]  # the landmarks' rows before the write (shared: in cache)
+                    mi, bi, slots, conf, read = (a[keep] for a in (mi, bi, slots, conf, read))
             new_mu, new_cov, d_sel, norm_sel = model.update_rows(
                 poses, z, r, mi, bi, store.field_rows("mean"), store.field_rows("cov"), read
             )
@@ -589,11 +590,12 @@ class MultiRobotFastSLAM:
         info_p, eta_p, quad_p, norm_p = terms[:4]
         if keep is not None:
             mi, info_p, eta_p, quad_p, norm_p = (a[keep] for a in (mi, info_p, eta_p, quad_p, norm_p))
-        mi = np.ascontiguousarray(mi, np.int64)
-        lam = lam0 + sum_by(mi, np.ascontiguousarray(info_p.reshape(-1, 9), float), m).reshape(m, 3, 3)
-        eta = sum_by(mi, np.ascontiguousarray(eta_p, float), m)
-        quad = sum_by(mi, np.ascontiguousarray(quad_p, float)[:, None], m)[:, 0]
-        logdet = sum_by(mi, np.ascontiguousarray(norm_p, float)[:, None], m)[:, 0]
+        info, eta, quad, logdet = sum_terms(
+            np.ascontiguousarray(mi, np.int64), np.ascontiguousarray(info_p.reshape(-1, 9), float),
+            np.ascontiguousarray(eta_p, float), np.ascontiguousarray(quad_p, float),
+            np.ascontiguousarray(norm_p, float), m,
+        )
+        lam = lam0 + info.reshape(m, 3, 3)
         cov, lam_det = sym_inv_det(lam)
         cov = 0.5 * (cov + np.swapaxes(cov, -1, -2))
         shift = (cov @ eta[..., None])[..., 0]
@@ -615,8 +617,8 @@ class MultiRobotFastSLAM:
         Returns:
             ((mode (M, 3), Λ⁻¹ (M, 3, 3), log marginal likelihood (M,), νᵀS⁻¹ν (M,),
             observation information Σ HₓᵀZ⁻¹Hₓ (M, 3, 3)); the per-pair terms of the last
-            linearisation (HₓᵀZ⁻¹Hₓ, HₓᵀZ⁻¹ν, νᵀZ⁻¹ν, dim·log 2π + log|Z|, ν, Z⁻¹, Hₓ);
-            P⁻¹ (M, 3, 3) and |P| (M,)).
+            linearisation (HₓᵀZ⁻¹Hₓ, HₓᵀZ⁻¹ν, νᵀZ⁻¹ν, dim·log 2π + log|Z|, ν, Z⁻¹, Hₓ; the last
+            three possibly empty without ``association.outlier_gate``); P⁻¹ (M, 3, 3) and |P| (M,)).
         """
         lam0, p_det = sym_inv_det(prior_cov)
         x_lin = x_hat
@@ -627,7 +629,8 @@ class MultiRobotFastSLAM:
                 dx = x_lin - x_hat
                 dx[:, 2] = wrap_angle(dx[:, 2])
             terms = self.model.proposal_terms(
-                x_lin, dx, z, r, mi, bi, store.field_rows("mean"), store.field_rows("cov"), rows
+                x_lin, dx, z, r, mi, bi, store.field_rows("mean"), store.field_rows("cov"), rows,
+                residuals=self.config.association.outlier_gate > 0,  # only _robust_fold reads them
             )
             fit = self._combine(x_hat, mi, terms, lam0, p_det)
             x_lin = fit[0]
@@ -743,7 +746,7 @@ class MultiRobotFastSLAM:
         store.maker[slots] = maker
         mi, j = np.nonzero(new[:, cols])
         bi = cols[j]
-        lm, cov = self.model.new_landmark(poses[mi], z[bi], r[bi])
+        lm, cov = self.model.new_landmark_rows(poses, z, r, mi, bi)
         store.write(mi, slots[j], mean=lm, cov=cov, exists=True, count=1, score=1)
         store.set_reference(slots[j], lm)
         started[mi, bi] = slots[j]

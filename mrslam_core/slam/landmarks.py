@@ -23,6 +23,8 @@ reference position (mean over the particles that hold the slot) for the search i
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from mrslam_core.arrays import unique_rows
@@ -192,9 +194,7 @@ class LandmarkStore:
         """Drop one reference to each entry of ``cid`` (repeats allowed); free those left with none."""
         if cid.size == 0:
             return
-        n = np.bincount(cid, minlength=self.refcount.size)  # O(pool), cheaper than sorting many ids
-        self.refcount -= n
-        self._free_chunks.push(np.flatnonzero((n > 0) & (self.refcount == 0)))
+        self._free_chunks.push(np.sort(kernels.release(self.refcount, np.ascontiguousarray(cid, np.int64))))
 
     def _free_dead_nodes(self, dead: np.ndarray) -> None:
         """Free the nodes ``dead`` (no table entry names them any more; any order) and drop their
@@ -311,11 +311,10 @@ class LandmarkStore:
             raise ValueError(f"unknown landmark fields {sorted(unknown)}")
         m = np.ascontiguousarray(m, np.int64).ravel()
         slots = np.ascontiguousarray(slots, np.int64).ravel()
-        col = slots // self.chunk
-        g, sub = col // self.fanout, col % self.fanout
         pick = np.empty(m.size, bool)
-        need = kernels.shared_nodes(self.table, self.node_ref, m, g, self._scratch_for(self.table.size), pick)
-        nid = np.empty(m.size, np.int64)
+        g, sub, off, nid = (np.empty(m.size, np.int64) for _ in range(4))
+        need = kernels.shared_nodes(self.table, self.node_ref, m, slots, self.chunk, self.fanout,
+                                    self._scratch_for(self.table.size), pick, g, sub, off, nid)
         if need:
             self._reserve_nodes(need)
             fl = self._free_nodes
@@ -323,8 +322,6 @@ class LandmarkStore:
                 self.table, self.nodes, self.node_ref, self.refcount, m, g, pick, fl.buf, fl.top, nid
             )
             self._free_dead_nodes(dead)
-        else:
-            nid = self.table[m, g]
         target = np.empty(m.size, np.int64)
         need = kernels.plan_chunks(self.nodes, self.refcount, nid, sub, self._scratch_for(self.nodes.size), target)
         self._reserve_chunks(need)
@@ -334,7 +331,7 @@ class LandmarkStore:
         freed = kernels.write_pairs(
             self.nodes, self.refcount,
             *(getattr(self, f"pool_{f}").reshape(self.refcount.size, -1) for f in _FIELDS),
-            nid, sub, slots % self.chunk, target, fl.buf, fl.top,
+            nid, sub, off, target, fl.buf, fl.top,
             *(self._values(f, values.get(f), m.size) for f in _FIELDS), seen is not None, int(seen or 0), rows,
         )
         self._free_chunks.push(np.sort(freed))
@@ -344,13 +341,15 @@ class LandmarkStore:
         """A value for :meth:`write` as the kernel takes it: (n or 1, width) for mean and cov,
         (n or 1,) for the others; (0, ...) when the field is not written."""
         per_slot = getattr(self, f"pool_{name}").shape[2:]
-        shape = (-1, int(np.prod(per_slot, dtype=np.int64))) if per_slot else (-1,)
+        shape = (-1, math.prod(per_slot)) if per_slot else (-1,)
         dtype = _VALUE_TYPES[name]
         if value is None:
             return np.zeros((0,) + shape[1:], dtype)
         value = np.asarray(value, dtype)
         if value.shape == per_slot:  # one for all
             return np.ascontiguousarray(value.reshape((1,) + shape[1:]))
+        if value.shape == (n,) + per_slot:  # one per pair (the filter's writes): no broadcast
+            return np.ascontiguousarray(value.reshape(shape))
         return np.ascontiguousarray(np.broadcast_to(value, (n,) + per_slot).reshape(shape))
 
     def exists_dense(self) -> np.ndarray:

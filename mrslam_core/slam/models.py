@@ -51,6 +51,12 @@ class ObservationModel:
         lm, ginv = self.inverse(pose, z)
         return lm, ginv @ r @ _t(ginv)
 
+    def new_landmark_rows(self, pose, z, r, pi, bi):
+        """:meth:`new_landmark` of P pairs: particle ``pi`` (P,) of ``pose`` (M, 3), observation
+        ``bi`` (P,) of ``z`` (B, dim) and ``r`` (B, dim, dim). Returns (mean (P, dim), covariance
+        (P, dim, dim)), map frame."""
+        return self.new_landmark(pose[pi], z[bi], r[bi])
+
     def score(self, pose, z, r, mu, sig, pose_cov=None, index=None) -> tuple[np.ndarray, np.ndarray]:
         """Mahalanobis distance D (eq. 15) and log det(2πZ) for landmark/observation pairs.
 
@@ -106,11 +112,13 @@ class ObservationModel:
         sig = np.take(cov, rows, axis=0).reshape(-1, dim, dim)
         return self.update(pose[pi], z[bi], r[bi], mu, sig)
 
-    def proposal_terms(self, x, dx, z, r, pi, bi, mean, cov, rows):
+    def proposal_terms(self, x, dx, z, r, pi, bi, mean, cov, rows, residuals=True):
         """Per-pair terms of the FastSLAM 2.0 proposal linearised at the poses x (M, 3), for P
         pairs: particle ``pi`` (P,), observation ``bi`` (P,) of z (B, dim) and r (B, dim, dim),
         landmark at pool ``rows`` (P,) of ``mean`` (R, dim) and ``cov`` (R, dim·dim). With Hₓ,
         Z = GΣGᵀ + R and ν = z − ẑ(x) + Hₓ dx (dx (M, 3): the iterated EKF's shift x − x̂).
+        ``residuals``: whether the caller needs ν, Z⁻¹ and Hₓ (a model may then return them
+        empty, (0, ...)).
 
         Returns:
             (HₓᵀZ⁻¹Hₓ (P, 3, 3), HₓᵀZ⁻¹ν (P, 3), νᵀZ⁻¹ν (P,), dim·log 2π + log|Z| (P,),
@@ -196,6 +204,15 @@ class StereoPointModel(ObservationModel):
         stereo_kernels.observation_terms(pose, np.cos(pose[:, 2]), np.sin(pose[:, 2]), z, r, lm, rn)
         return lm.reshape(lead + (3,)), rn[:, 0, [0, 1, 2, 1, 3, 4, 2, 4, 5]].reshape(lead + (3, 3))
 
+    def new_landmark_rows(self, pose, z, r, pi, bi):
+        """:meth:`new_landmark` of P pairs in one pass (:func:`~mrslam_core.slam.stereo_kernels.new_points`)."""
+        pose = np.ascontiguousarray(pose[pi], float)
+        n = pose.shape[0]
+        lm, cov = np.empty((n, 3)), np.empty((n, 9))
+        stereo_kernels.new_points(pose, np.cos(pose[:, 2]), np.sin(pose[:, 2]), np.ascontiguousarray(z, float),
+                                  np.ascontiguousarray(r, float), np.ascontiguousarray(bi, np.int64), lm, cov)
+        return lm, cov.reshape(n, 3, 3)
+
     def pose_jacobian(self, pose: np.ndarray, landmark: np.ndarray) -> np.ndarray:
         zhat, _ = self.predict(pose, landmark)
         c, s = np.cos(pose[..., 2]), np.sin(pose[..., 2])
@@ -279,13 +296,15 @@ class StereoPointModel(ObservationModel):
         with np.errstate(divide="ignore", invalid="ignore"):
             return new_mu, new_sig.reshape(n, 3, 3), maha, 3 * LOG_2PI + np.log(det)
 
-    def proposal_terms(self, x, dx, z, r, pi, bi, mean, cov, rows):
+    def proposal_terms(self, x, dx, z, r, pi, bi, mean, cov, rows, residuals=True):
         """In the map frame (:func:`~mrslam_core.slam.stereo_kernels.proposal_terms`): ν, Z and Hₓ
-        rotated by Rz(θ), which leaves HₓᵀZ⁻¹Hₓ, HₓᵀZ⁻¹ν, νᵀZ⁻¹ν and |Z| unchanged."""
+        rotated by Rz(θ), which leaves HₓᵀZ⁻¹Hₓ, HₓᵀZ⁻¹ν, νᵀZ⁻¹ν and |Z| unchanged; without
+        ``residuals`` they are (0, ...)."""
         x = np.ascontiguousarray(x, float)
         n = rows.size
-        info, zinv, hx = np.empty((n, 3, 3)), np.empty((n, 3, 3)), np.empty((n, 3, 3))
-        eta, nu = np.empty((n, 3)), np.empty((n, 3))
+        kept = n if residuals else 0
+        info, zinv, hx = np.empty((n, 3, 3)), np.empty((kept, 3, 3)), np.empty((kept, 3, 3))
+        eta, nu = np.empty((n, 3)), np.empty((kept, 3))
         quad, det = np.empty(n), np.empty(n)
         stereo_kernels.proposal_terms(
             x, np.ascontiguousarray(dx, float), np.cos(x[:, 2]), np.sin(x[:, 2]), np.ascontiguousarray(z, float),

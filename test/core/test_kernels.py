@@ -9,7 +9,7 @@ from mrslam_core.slam import stereo_kernels
 from mrslam_core.slam.association_kernels import ml_cost
 from mrslam_core.slam.landmarks import LandmarkStore
 from mrslam_core.slam.models import ObservationModel, StereoPointModel
-from mrslam_core.slam.proposal_kernels import sum_by
+from mrslam_core.slam.proposal_kernels import sum_terms
 from mrslam_core.slam.store_kernels import copy_table_rows, plan_chunks
 
 
@@ -100,6 +100,11 @@ def test_proposal_terms_equal_the_generic_ones():
         return np.einsum("pi,pij,pj->p", e, zinv, e)
 
     np.testing.assert_allclose(residual(*got[4:]), residual(*want[4:]), rtol=1e-9)
+    # without residuals (no outlier gate): the same sums' terms bit for bit, ν, Z⁻¹, Hₓ empty
+    lean = model.proposal_terms(x, dx, z, r, pairs, pairs, mean, cov, pairs, residuals=False)
+    for g, w in zip(lean[:4], got[:4]):
+        np.testing.assert_array_equal(g, w)
+    assert [a.shape[0] for a in lean[4:]] == [0, 0, 0]
 
 
 def test_ml_cost_equals_the_numpy_rule():
@@ -129,12 +134,14 @@ def test_ml_cost_equals_the_numpy_rule():
     np.testing.assert_array_equal(got, want)
 
 
-def test_sum_by_equals_bincount_bit_for_bit():
+def test_sum_terms_equals_bincount_bit_for_bit():
     rng = np.random.default_rng(4)
     index = rng.integers(0, 7, 500)
-    values = rng.standard_normal((500, 3)) * 10.0 ** rng.integers(-8, 8, (500, 3))
-    want = np.stack([np.bincount(index, values[:, c], 9) for c in range(3)], axis=1)
-    np.testing.assert_array_equal(sum_by(index, values, 9), want)
+    values = rng.standard_normal((500, 14)) * 10.0 ** rng.integers(-8, 8, (500, 14))
+    want = np.stack([np.bincount(index, values[:, c], 9) for c in range(14)], axis=1)
+    got = sum_terms(index, np.ascontiguousarray(values[:, :9]), np.ascontiguousarray(values[:, 9:12]),
+                    values[:, 12].copy(), values[:, 13].copy(), 9)
+    np.testing.assert_array_equal(np.column_stack(got), want)
 
 
 def test_plan_chunks_gives_each_shared_chunk_the_rank_of_its_last_occurrence():
@@ -246,3 +253,17 @@ def test_warm_up_loads_every_kernel_a_filter_steps(kind):
     assert sum(before.values()) > 0
     warm_up(cfg, landmarks=7)
     assert {d.__name__: len(d.signatures) for d in dispatchers} == before
+
+
+def test_new_landmark_rows_equal_new_landmark_bit_for_bit():
+    rng = np.random.default_rng(7)
+    m, b, p = 9, 5, 30
+    pose = np.column_stack([rng.uniform(-3, 3, (m, 2)), rng.uniform(-3, 3, m)])
+    z = rng.uniform(-4, 4, (b, 3))
+    r = _spd(rng, b)
+    pi, bi = rng.integers(0, m, p), rng.integers(0, b, p)
+    model = StereoPointModel()
+    got = model.new_landmark_rows(pose, z, r, pi, bi)
+    want = model.new_landmark(pose[pi], z[bi], r[bi])
+    for g, w in zip(got, want):
+        np.testing.assert_array_equal(g, w)
