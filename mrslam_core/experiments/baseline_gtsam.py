@@ -1,7 +1,7 @@
 """``mrslam experiment baseline_gtsam DIR``: a GTSAM factor-graph baseline on MR.CLAM (issue 28).
 
-The same parsed data as the filter (:func:`mrslam_core.pipelines.mrclam.run`) — odometry with the
-same delay, the same measurements (one reading per subject and stamp, barcodes → subjects),
+The same parsed and calibrated data as the filter (:func:`mrslam_core.pipelines.mrclam.run`,
+``MrclamConfig.calibration``) — odometry with the same delay, the same measurements (one reading per subject and stamp, barcodes → subjects),
 robot-to-robot sightings, ground-truth start poses at the first common timestamp — go into one
 factor graph over all robots:
 
@@ -10,15 +10,14 @@ factor graph over all robots:
 - ``BetweenFactorPose2`` between consecutive poses from the logged (v, ω) integrated over the
   interval (:class:`~mrslam_core.datasets.mrclam.OdometryIntegrator`), with the covariance of the
   filter's own MR.CLAM motion model (:func:`mrslam_core.slam.motion.predict_motion` with
-  ``MrclamConfig().filter.motion``: alpha1..4 = 0.1, 0.1, 0.01, 0.001 on (rot1, trans, rot2) plus
-  random walks 0.02 m/√s and 0.04 rad/√s), moved from the start pose's frame into the frame
+  ``MrclamConfig().filter.motion``, config/mrclam.yaml), moved from the start pose's frame into the frame
   of the end pose, which is where GTSAM's Pose2 between error lives;
-- ``BearingRangeFactor2D`` (landmarks, σ = 0.15 m, 0.02 rad) and ``BearingRangeFactorPose2``
-  (other robots, σ = 0.25 m, 0.04 rad), the filter's MR.CLAM measurement noise, each behind a
-  Huber loss (k = 1.345). A measurement is attached to the robot's pose nearest its time after
+- ``BearingRangeFactor2D`` (landmarks) and ``BearingRangeFactorPose2`` (other robots) with the
+  filter's MR.CLAM measurement noise (``MrclamConfig.sigma_*``), each behind a Huber loss
+  (k = 1.345). A measurement is attached to the robot's pose nearest its time after
   being re-expressed in that pose's frame through the robot's own odometry between the two times
   (≤ period/2). For a sighting the other robot's motion over that interval is not compensated
-  (≤ 0.1 s at ≤ 0.2 m/s, 0.02 m against σ = 0.25 m);
+  (≤ 0.1 s at ≤ 0.2 m/s: ≤ 0.02 m);
 - a tight prior (1 mm, 1 mrad) on each robot's ground-truth start pose, which fixes the map frame
   (so ATE is unaligned, as for the filter); no landmark ground truth: a landmark's initial value
   comes from its first sighting from the dead-reckoned pose.
@@ -259,6 +258,7 @@ def odometry_covariance(delta: np.ndarray, dt: float, cfg: MrclamConfig) -> np.n
 
 def mrclam_inputs(ds: MrclamDataset, cfg: MrclamConfig) -> dict:
     """The filter pipeline's data as :func:`build_graph` arguments (plus "odom": integrators)."""
+    ds = ds.calibrated(cfg.calibration)
     t0, t1 = ds.time_span()
     if cfg.duration is not None:
         t1 = min(t1, t0 + cfg.duration)

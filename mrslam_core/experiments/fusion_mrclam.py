@@ -107,6 +107,7 @@ def run_unknown_start(ds: MrclamDataset, cfg: MrclamFusionConfig, progress: bool
     """
     mc = cfg.mrclam
     robots = mc.numbers
+    ds = ds.calibrated(mc.calibration)
     t0, t1 = ds.time_span()
     if mc.duration is not None:
         t1 = min(t1, t0 + mc.duration)

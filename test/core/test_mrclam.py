@@ -45,9 +45,9 @@ def test_short_run_writes_consistent_metrics(mrclam6):
     res = run(ds, cfg)
     for tr in res["trajectories"].values():
         m = robot_metrics(tr)
-        # 100 particles over 60 s: seed 0 gives 0.41 m at most (robot 2); over seeds 0-9 the
-        # largest robot was 0.66 m, dead reckoning drifts metres over the run
-        assert m["ate_rmse_m"] < 0.5
+        # 100 particles over 60 s: seed 0 gives 0.117 m at most (robot 5); over seeds 0-5 the
+        # largest robot was 0.150 m, dead reckoning drifts metres over the run
+        assert m["ate_rmse_m"] < 0.25
         np.testing.assert_allclose(tr["est"][0], tr["gt"][0], atol=1e-9)  # known start poses
 
 
@@ -55,12 +55,11 @@ def test_short_run_writes_consistent_metrics(mrclam6):
 def test_joint_filter_accuracy_on_dataset6(mrclam6):
     """docs/results.md, MR.CLAM: the default config (through the central mapper), seed 0, all 772 s.
 
-    Issue 2's target for every robot: ATE ≤ 0.25 m and ≤ 30 % of its dead reckoning. Robot 4
-    (no landmark from 240 s to 340 s) relies on deferred motion noise while unobserved and on
-    re-localisation when it returns. Seed 0 gives 0.142 0.192 0.190 0.272 0.202 m. One seed of a
-    filter whose per-robot ATE spreads 0.13-0.30 m over seeds 0-14 (robot 4 above 0.25 m in 4 of
-    10 seeds, as with the previous loop once its odometry delay moves by 1 µs): the per-robot
-    bound is that spread's top, 0.30 m; the medians over seeds are in docs/results.md.
+    Seed 0 gives 0.097 0.155 0.126 0.192 0.117 m (team mean 0.137 m); over seeds 0-4 no robot
+    was above 0.192 m and no team mean above 0.137 m. Robot 4 (no landmark from 240 s to 340 s,
+    dead reckoning in between) is the largest, at 23 % of its calibrated dead reckoning. The
+    bounds are the top of that spread plus 0.02 m (the filter is chaotic: a 1 µs change of the
+    odometry delay moves a robot by several centimetres).
     """
     ds = MrclamDataset(mrclam6)
     with ProcessPoolExecutor(2) as pool:  # the joint and the independent filters, one core each
@@ -69,9 +68,9 @@ def test_joint_filter_accuracy_on_dataset6(mrclam6):
         joint, indep = joint_job.result(), indep_job.result()
     ate = {n: robot_metrics(tr) for n, tr in joint["trajectories"].items()}
     for name, m in ate.items():
-        assert m["ate_rmse_m"] <= 0.30, (name, m)
-        assert m["ate_over_odom"] <= (0.30 if name == "robot4" else 0.20), (name, m)
+        assert m["ate_rmse_m"] <= 0.21, (name, m)
+        assert m["ate_over_odom"] <= (0.30 if name == "robot4" else 0.15), (name, m)
     mean_joint = np.mean([m["ate_rmse_m"] for m in ate.values()])
-    assert mean_joint <= 0.22
+    assert mean_joint <= 0.16
     mean_indep = np.mean([robot_metrics(tr)["ate_rmse_m"] for tr in indep["trajectories"].values()])
     assert mean_joint < mean_indep

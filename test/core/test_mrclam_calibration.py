@@ -1,0 +1,85 @@
+"""MR.CLAM calibration: depth readings to distances, executed velocities, and the fits behind them."""
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from mrslam_core.datasets.mrclam import MrclamCalibration, MrclamDataset
+from mrslam_core.experiments.mrclam_calibration import (
+    contaminated_normal,
+    fit_motion,
+    fit_range,
+    fit_velocity_scales,
+    huber_line,
+    readings,
+)
+from mrslam_core.slam.config import MotionConfig
+from mrslam_core.slam.motion import predict_motion
+
+
+def test_a_depth_reading_becomes_the_distance():
+    cal = MrclamCalibration(range_offset=0.05, range_scale=1.02)
+    r = np.array([0.5, 2.0, 4.0])
+    b = np.array([0.0, 0.3, -0.5])
+    reading = 0.05 + 1.02 * r * np.cos(b)
+    np.testing.assert_allclose(cal.range_of(reading, b), r, rtol=0, atol=1e-12)
+    # identity: only the depth-to-distance step, 3 m read at 0.3 rad is 0.134 m short
+    assert MrclamCalibration(0.0, 1.0, 1.0, 1.0).range_of(3.0, 0.3) - 3.0 == pytest.approx(3.0 / np.cos(0.3) - 3.0)
+    with pytest.raises(ValueError, match="must be > 0"):
+        MrclamCalibration(range_scale=0.0)
+
+
+def test_calibrated_dataset_converts_readings_and_velocities(mrclam6):
+    ds = MrclamDataset(mrclam6)
+    cal = MrclamCalibration()
+    out = ds.calibrated(cal)
+    for i, log in ds.robots.items():
+        m, c = log.measurements, out.robots[i].measurements
+        np.testing.assert_array_equal(c[:, [0, 1, 3]], m[:, [0, 1, 3]])
+        np.testing.assert_allclose(c[:, 2], (m[:, 2] - cal.range_offset) / (cal.range_scale * np.cos(m[:, 3])))
+        np.testing.assert_allclose(out.robots[i].odometry[:, 1:], log.odometry[:, 1:] * [cal.velocity_scale, cal.turn_rate_scale])
+        assert out.robots[i].groundtruth is log.groundtruth
+    assert not np.shares_memory(out.robots[1].measurements, ds.robots[1].measurements)
+
+
+def test_huber_line_and_contaminated_normal_recover_known_values():
+    rng = np.random.default_rng(0)
+    x = rng.uniform(0.5, 5.0, 20000)
+    y = 0.05 + 1.02 * x + rng.normal(0, 0.03, x.size)
+    y[:400] += rng.uniform(-2, 2, 400)  # 2 % gross errors
+    (c0, c1), s = huber_line(x, y)
+    assert abs(c0 - 0.05) < 0.003 and abs(c1 - 1.02) < 0.001 and abs(s - 0.03) < 0.002
+    e = np.concatenate([rng.normal(0.01, 0.06, 19000), rng.uniform(-5, 5, 1000)])
+    mu, sigma, eps = contaminated_normal(e, 10.0)
+    assert abs(mu - 0.01) < 0.002 and abs(sigma - 0.06) < 0.002 and abs(eps - 0.05) < 0.005
+
+
+def test_motion_fit_recovers_the_noise_it_was_drawn_from():
+    truth = MotionConfig(alpha1=0.2, alpha2=0.0, alpha3=0.02, alpha4=0.004, sigma_xy_rw=0.005, sigma_theta_rw=0.02)
+    rng = np.random.default_rng(1)
+    n, step = 4000, 0.2
+    odo = np.column_stack([rng.uniform(0, 0.05, n), rng.normal(0, 0.005, n), rng.normal(0, 0.05, n)])
+    zero = np.zeros((1, 3))
+    true = np.array([predict_motion(zero, d, truth, step)[0][0] + rng.multivariate_normal(np.zeros(3), predict_motion(zero, d, truth, step)[1][0])
+                     for d in odo])
+    fitted, _ = fit_motion(odo, true, step, MotionConfig(alpha1=0.1, alpha2=0.1, alpha3=0.01, alpha4=0.001, sigma_xy_rw=0.02, sigma_theta_rw=0.04))
+    assert fitted.sigma_theta_rw == pytest.approx(0.02, rel=0.1)
+    assert fitted.sigma_xy_rw == pytest.approx(0.005, rel=0.1)
+    assert fitted.alpha1 == pytest.approx(0.2, rel=0.2)
+    assert fitted.alpha3 == pytest.approx(0.02, rel=0.2)
+
+
+def test_dataset6_calibration_is_the_profile_and_holds_for_robots_it_was_not_fitted_on(mrclam6):
+    """The shipped defaults are what `mrslam experiment mrclam_calibration` fits on dataset 6,
+    and each robot's readings are predicted by the other four robots' line about as well as by
+    its own (the line is the camera model, not a robot's)."""
+    ds = MrclamDataset(mrclam6)
+    (offset, scale), per = fit_range({i: readings(ds, i, False) for i in ds.robots})
+    v_scale, w_scale = fit_velocity_scales(ds, 0.25)
+    shipped = MrclamCalibration()
+    assert (round(offset, 3), round(scale, 3)) == (shipped.range_offset, shipped.range_scale)
+    assert (round(v_scale, 3), round(w_scale, 3)) == (shipped.velocity_scale, shipped.turn_rate_scale)
+    for i, p in per.items():
+        assert p["others"] < 0.065, (i, p)  # against 0.08-0.18 m read as distances
+        assert p["others"] < p["distance"] / 2, (i, p)
