@@ -64,11 +64,13 @@ class MrclamConfig(CentralConfig):
         calibration: how the logs relate to the robots' motion and to the scene (the camera
             reads depth along its axis; the robots execute less than the commanded velocity):
             applied to the dataset before anything reads it.
-        sigma_range, sigma_bearing: landmark measurement noise [m], [rad] of calibrated
-            readings; sigma_sighting_range, sigma_sighting_bearing: that of robot-to-robot
-            readings. The σ of a contaminated normal fitted to dataset 6's residuals against
+        sigma_range: landmark range noise of calibrated readings [m]. This σ and the three
+            below are those of a contaminated normal fitted to dataset 6's residuals against
             Vicon, all robots pooled (``mrslam experiment mrclam_calibration``; outlier shares
             0.1–0.5 %).
+        sigma_bearing: landmark bearing noise [rad].
+        sigma_sighting_range: range noise of robot-to-robot readings [m].
+        sigma_sighting_bearing: bearing noise of robot-to-robot readings [rad].
         use_sightings: put robot-to-robot measurements into the sets (scored in the particle
             weights).
         mode: one joint filter (one mapper), or independent single-robot filters (one mapper
