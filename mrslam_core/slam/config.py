@@ -58,8 +58,10 @@ class AssociationConfig:
     ``descriptor_trust_gate`` (D1 >= D0, or 0 = off): when no candidate passes D0 but one whose
     descriptor matches (E <= E0) lies within D1, associate with it instead of starting a
     duplicate landmark. For descriptors that identify a landmark for certain (barcodes), this is
-    association by known correspondence and lets a drifted robot re-localise; for visual
-    descriptors keep it off.
+    association by known correspondence and lets a drifted robot re-localise; and a reading
+    whose descriptor matches a landmark the particle holds but which fails even D1 is a misread
+    (a second landmark of one identity cannot exist): it neither updates nor starts a landmark
+    and is counted (``misread_descriptor``). For visual descriptors keep it off.
     ``candidate_search``: landmarks near the observation (a grid over positions, for
     repetitive visual features) or landmarks whose descriptor is within E0 wherever they are (a
     kd-tree over descriptors, 002 section III; for identifying descriptors such as barcodes).

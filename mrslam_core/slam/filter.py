@@ -366,6 +366,7 @@ class MultiRobotFastSLAM:
             track_slot = memory.lookup(tracks)  # (M, B)
             cand, e = self._with_track_candidates(cand, e, desc, track_slot)
         pair = np.full((m, b), -1, np.int64)
+        misread = None
         vb, vc = np.nonzero(cand >= 0)  # the V (observation, candidate) pairs worth scoring
         vslots = cand[vb, vc]
         if vb.size:
@@ -393,6 +394,8 @@ class MultiRobotFastSLAM:
                     pair, n = resolve_conflicts(pair, vslots, cost)
                     if n:
                         self.dropped["duplicate_association"] += n
+                if cfg.descriptor_trust_gate > cfg.mahalanobis_gate:
+                    misread = self._misread(pair, held, vb, b)
             else:
                 feasible = held & (maha <= cfg.mahalanobis_gate)
                 ll = np.where(feasible, -0.5 * (maha + log_norm), -np.inf)
@@ -403,7 +406,7 @@ class MultiRobotFastSLAM:
                     pair = np.where(pair >= 0, pair, second)
 
         assoc = pair >= 0
-        rejected = np.zeros_like(assoc)
+        rejected = np.zeros_like(assoc) if misread is None else misread
         mi = bi = np.zeros(0, np.int64)
         if vb.size:
             # read: the landmarks' rows before the write (shared: in cache)
@@ -447,6 +450,19 @@ class MultiRobotFastSLAM:
                 kept[mi, bi] = slots
             memory.record(tracks, np.where(kept >= 0, kept, new_slots))
         return int(assoc.sum()), created
+
+    def _misread(self, pair: np.ndarray, held: np.ndarray, vb: np.ndarray, b: int) -> np.ndarray:
+        """(M, B) observations that a particle's map holds a landmark of the same identifying
+        descriptor for (``descriptor_trust_gate`` on) but that fail even the trust gate D1: with
+        descriptors that identify a landmark for certain, a second landmark of that identity
+        cannot exist, so the reading is wrong (a misread barcode); it neither updates nor starts
+        a landmark, and is counted as ``misread_descriptor``."""
+        same = np.zeros((vb.size, b))
+        same[np.arange(vb.size), vb] = 1.0
+        misread = ((held @ same) > 0) & (pair < 0)
+        if misread.any():
+            self.dropped["misread_descriptor"] += int(misread.any(axis=0).sum())
+        return misread
 
     def _with_track_candidates(
         self, cand: np.ndarray, e: np.ndarray, desc: np.ndarray, track_slot: np.ndarray

@@ -241,6 +241,33 @@ def _lost_robot_filter(**kw):
     return slam
 
 
+def test_a_misread_identity_descriptor_starts_no_landmark():
+    """Barcodes identify a landmark for certain (descriptor_trust_gate on): a reading of landmark
+    0's barcode 20 m from where every particle holds landmark 0 (Mahalanobis ≫ D1) is a misread,
+    dropped and counted, not a second landmark 0; the same reading 0.5 m off (beyond D0, within
+    D1) is still landmark 0."""
+    from mrslam_core.slam.config import MotionConfig
+
+    cfg = FilterConfig(num_particles=20, seed=3, proposal="fastslam2", observation_model="range_bearing",
+                       motion=MotionConfig(sigma_xy_rw=0.001, sigma_theta_rw=0.001),
+                       association=AssociationConfig(candidate_search="descriptor", descriptor_trust_gate=1e4))
+    slam = MultiRobotFastSLAM(cfg, ["a"], np.zeros((1, 3)))
+    slam.step([RobotUpdate("a", 10**8, np.zeros(3), _rb(np.zeros(3), [0, 1, 2]))])
+    _, before, _, _, _ = slam.best_map()
+    far = _rb(np.zeros(3), [0])
+    far.z[0, 0] += 20.0
+    slam.step([RobotUpdate("a", 2 * 10**8, np.zeros(3), far)])
+    slots, after, _, _, _ = slam.best_map()
+    assert slots.size == 3 and slam.dropped["misread_descriptor"] == 1
+    np.testing.assert_array_equal(after, before)
+    near = _rb(np.zeros(3), [0])
+    near.z[0, 0] += 0.5
+    slam.step([RobotUpdate("a", 3 * 10**8, np.zeros(3), near)])
+    slots, after, _, _, _ = slam.best_map()
+    assert slots.size == 3 and slam.dropped["misread_descriptor"] == 1
+    assert not np.array_equal(after, before)  # landmark 0 updated
+
+
 def test_lost_robot_is_relocalised_from_two_landmarks():
     slam = _lost_robot_filter()
     _, map_before, _, _, _ = slam.best_map()
