@@ -42,6 +42,11 @@ GROSS_RANGE, GROSS_BEARING = 0.6, 0.1
 MOTION_FIELDS = ("alpha1", "alpha2", "alpha3", "alpha4", "sigma_xy_rw", "sigma_theta_rw")
 
 
+def robust_sigma(e: np.ndarray) -> float:
+    """σ of residuals ``e`` from their median absolute deviation (1.4826 MAD)."""
+    return 1.4826 * float(np.median(np.abs(e - np.median(e))))
+
+
 def huber_line(x: np.ndarray, y: np.ndarray, k: float = 1.345, iterations: int = 20) -> tuple[np.ndarray, float]:
     """Huber-weighted least squares y ≈ c0 + c1·x; returns ((c0, c1), robust σ of the residual)."""
     a = np.column_stack([np.ones_like(x), x])
@@ -49,7 +54,7 @@ def huber_line(x: np.ndarray, y: np.ndarray, k: float = 1.345, iterations: int =
     for _ in range(iterations):
         c = np.linalg.lstsq(a * w[:, None], y * w, rcond=None)[0]
         r = y - a @ c
-        s = 1.4826 * float(np.median(np.abs(r)))
+        s = robust_sigma(r)
         w = np.sqrt(np.minimum(1.0, k * s / np.maximum(np.abs(r), 1e-12)))
     return c, s
 
@@ -57,7 +62,7 @@ def huber_line(x: np.ndarray, y: np.ndarray, k: float = 1.345, iterations: int =
 def contaminated_normal(e: np.ndarray, span: float, iterations: int = 200) -> tuple[float, float, float]:
     """EM fit of (1-ε)·N(μ, σ²) + ε·U(span) to residuals ``e``; returns (μ, σ, ε)."""
     mu = float(np.median(e))
-    sigma = 1.4826 * float(np.median(np.abs(e - mu)))
+    sigma = robust_sigma(e)
     eps = 0.05
     for _ in range(iterations):
         inlier = (1 - eps) * np.exp(-0.5 * ((e - mu) / sigma) ** 2) / (np.sqrt(2 * np.pi) * sigma)
@@ -117,9 +122,9 @@ def fit_range(data: dict[int, tuple]) -> tuple[tuple[float, float], dict[int, di
         own, s_own = line([i])
         others, _ = line([j for j in data if j != i])
         z = (r * np.cos(b))[k]
-        mad = lambda e: 1.4826 * float(np.median(np.abs(e - np.median(e))))  # noqa: E731
-        per[i] = {"own": s_own, "others": mad(reading[k] - others[0] - others[1] * z),
-                  "distance": mad(reading[k] - r[k]), "own_offset": float(own[0]), "own_scale": float(own[1])}
+        per[i] = {"own": s_own, "others": robust_sigma(reading[k] - others[0] - others[1] * z),
+                  "distance": robust_sigma(reading[k] - r[k]), "own_offset": float(own[0]),
+                  "own_scale": float(own[1])}
     return (float(c0), float(c1)), per
 
 
