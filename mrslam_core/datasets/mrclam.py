@@ -16,6 +16,7 @@ are the commanded ones, which the robots execute about 7 % slower.
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -124,8 +125,7 @@ class MrclamDataset:
     def calibrated(self, calibration: MrclamCalibration) -> MrclamDataset:
         """A copy whose measurements hold distances (:meth:`MrclamCalibration.range_of`) and
         whose odometry holds the executed velocities; ground truth and landmarks are shared."""
-        out = object.__new__(MrclamDataset)
-        out.landmarks, out.unknown_barcodes = self.landmarks, self.unknown_barcodes
+        out = copy.copy(self)
         out.robots = {}
         for i, log in self.robots.items():
             meas, odo = log.measurements.copy(), log.odometry.copy()

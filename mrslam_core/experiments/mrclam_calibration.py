@@ -84,7 +84,10 @@ def readings(ds: MrclamDataset, robot: int, robots: bool) -> tuple[np.ndarray, n
     pose = ds.groundtruth(robot, m[:, 0])
     if robots:
         keep = m[:, 1] <= ds.num_robots
-        target = np.array([ds.groundtruth(int(s), np.array([t]))[0, :2] for t, s in m[keep, :2]]).reshape(-1, 2)
+        target = np.empty((int(keep.sum()), 2))
+        for s in np.unique(m[keep, 1]):  # each read robot at its readings' times
+            mine = m[keep, 1] == s
+            target[mine] = ds.groundtruth(int(s), m[keep][mine, 0])[:, :2]
     else:
         where = {int(s): (x, y) for s, x, y in ds.landmarks}
         keep = np.isin(m[:, 1], list(where))
