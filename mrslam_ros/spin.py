@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import faulthandler
+import signal
 import sys
 import traceback
 from collections.abc import Callable
@@ -15,6 +17,9 @@ def run_node(make: Callable[[], Node], argv: list[str] | None = None, threads: i
     """Create the node with ``make`` after ``rclpy.init(argv)`` and spin it (with a multi-threaded
     executor of ``threads`` threads when > 1, for nodes with several callback groups); returns 0."""
     rclpy.init(args=argv if argv is not None else sys.argv)
+    # A node that a launcher's SIGINT did not stop gets SIGTERM: print where every thread is
+    # (into the node's log) before rclpy's own handler runs, so a hang names its cause.
+    faulthandler.register(signal.SIGTERM, all_threads=True, chain=True)
     node = make()
     try:
         if threads > 1:
