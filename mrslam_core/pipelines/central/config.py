@@ -22,45 +22,37 @@ class MapCheckConfig:
     """Checking each robot against the older map while it drives (a robot that lost its heading).
 
     Every ``every`` seconds of a robot's sets, its sets of the last ``window`` seconds, moved into
-    its current base_link (one point per frontend track), are aligned to the best
-    particle's landmarks that are older than ``age`` (descriptor matches, RANSAC and least
-    squares, the ``fusion`` thresholds but ``min_inliers``). Landmarks the robot mapped since it
-    went wrong are younger and left out, so the fit shows where the older map puts the robot. If
-    the fit is more than ``shift`` or ``turn`` away from the robot's estimate (and within
-    ``max_shift`` and ``max_turn``: no jump across the building), the robot's pose is drawn again in
-    every particle from the fit. A robot whose wheels slipped while it saw nothing comes back
-    several degrees off, and then maps a corridor mapped before as a new one, turned: no
-    association gate reaches landmarks 0.3 m away, while descriptors do.
+    its current base_link (one point per frontend track), are aligned to the best particle's
+    landmarks that are older than ``age`` (descriptor matches, RANSAC and least squares, the
+    ``fusion`` thresholds but ``min_inliers``). Landmarks the robot mapped since it went wrong
+    are younger and left out. Whether the robot is where its filter says or lost is then decided
+    in every particle by the posterior odds of the two under the frame's likelihood against that
+    particle's older landmarks (:mod:`~mrslam_core.pipelines.central.map_move`): a lost robot is
+    moved to a pose drawn from the alignment, in the particles that find it lost. A robot whose
+    wheels slipped while it saw nothing comes back several degrees off, and then maps a corridor
+    mapped before as a new one, turned: no association gate reaches landmarks 0.3 m away, while
+    descriptors do. The same decision places a robot back from a gap (``relocalize_after``).
 
     Attributes:
         every: seconds of a robot's sets between checks; 0: off (and 0 with a filter whose
             observations are not stereo points) [s].
         window: seconds of the robot's recent sets aligned together [s]. 3 s, not 2: after a
             blind turn a robot meets few old landmarks a set, and a longer window gathers the
-            inliers a fit needs (closed loop, seeds 14-39: robots above 0.10 m 2 -> 1 of 78,
-            docs/results.md).
+            inliers a fit needs (docs/results.md).
         age: only landmarks created at least this long before the check take part [s].
-        min_inliers: fewest RANSAC inliers of a fit that may move the robot.
-        min_gain: a fit that disagrees must explain at least this many more of the window's
-            descriptor matches (counted as ``gain_gate`` says) than the robot's estimate does;
-            otherwise the two are look-alikes of each other and the check is ``ambiguous``.
-            Recorded demos d1–d3 (counted within 0.3 m): moves that fixed a heading gained 9–35
-            inliers; a move onto a fit 16° off gained 1, one onto a fit 0.8 m off gained 7.
-        shift: a fit closer than this to the estimate, and within ``turn``, agrees with it [m].
-        turn: see ``shift`` [rad]. 2.5°: under ``gain_gate`` an estimate 2.5–5° off explains
-            far fewer matches than its fit and is corrected (counted within 0.3 m it explained
-            about as many, and 2.5° moved no robot more than 5° did; docs/results.md).
-        max_shift: a fit further than this from the estimate is not used [m].
-        max_turn: a fit turned more than this from the estimate is not used [rad].
-        sigma_xy: standard deviation added to the fit's own, per axis, when the poses are drawn [m].
+        min_inliers: fewest RANSAC inliers of an alignment that is weighed at all.
+        lost_probability: ε, the prior probability that a robot is lost at a check (the
+            contamination of its pose prior).
+        outlier_probability: η, the chance that a frame point has no counterpart among its
+            descriptor candidates in the older map (a landmark new to the map, a look-alike).
+        candidates: descriptor candidates per frame point (nearest within the fusion's
+            ``descriptor_threshold``), over which a point's likelihood is summed.
+        max_shift: a lost robot is anywhere within this distance of its estimate [m].
+        max_turn: and within this heading change [rad].
+        sigma_xy: standard deviation per axis added to the spread of the robot's particles (the
+            prior of "where the filter says"), to the alignment's covariance, and to every point
+            residual (the frame's chaining error) [m].
         sigma_theta: the same for the heading [rad].
-        gain_gate: how ``min_gain`` counts the matches a pose explains: 0, within the fusion's
-            ``inlier_distance`` (the fit's RANSAC inliers against the estimate's); > 0, within
-            this chi-square (2 dof) gate of the planar Mahalanobis distance under both points'
-            covariances plus ``sigma_xy`` (the fit's and the estimate's counted alike). 9.21
-            (chi-square 0.99): a robot 5° off explains no stereo point 2 m away, which a 0.3 m
-            distance still counts (recorded demo d1, robot3 5.3° off: within 0.3 m its estimate
-            explained 10 matches against the fit's 18, under the gate 1 against 21).
         distrust_moved: when a check moves a robot, the landmarks it made since its last
             agreeing check (all of them, if it never had one) were mapped from the wrong pose;
             later checks leave them out of the older map, so no robot is moved onto them.
@@ -74,16 +66,23 @@ class MapCheckConfig:
     window: float = 3.0
     age: float = 10.0
     min_inliers: int = 10
-    min_gain: int = 8
-    shift: float = 0.3
-    turn: float = 0.044
+    lost_probability: float = 0.01
+    outlier_probability: float = 0.5
+    candidates: int = 4
     max_shift: float = 1.0
     max_turn: float = 0.5
     sigma_xy: float = 0.03
     sigma_theta: float = 0.015
     poses: Literal["estimate", "odometry"] = "estimate"
-    gain_gate: float = 9.21
     distrust_moved: bool = True
+
+    def __post_init__(self) -> None:
+        if not (0.0 < self.lost_probability < 1.0 and 0.0 < self.outlier_probability < 1.0):
+            raise ValueError("lost_probability and outlier_probability must be in (0, 1)")
+        if self.candidates < 1:
+            raise ValueError("candidates must be >= 1")
+        if self.max_shift <= 0 or self.max_turn <= 0 or self.sigma_xy <= 0 or self.sigma_theta <= 0:
+            raise ValueError("max_shift, max_turn, sigma_xy and sigma_theta must be > 0")
 
 
 @dataclass(frozen=True)

@@ -1,12 +1,13 @@
 """Corrections: moving a robot of the central filter where its odometry alone would not put it.
 
-A robot back from a gap (silent for longer than ``relocalize_after``) is placed by aligning its
-observation set to the map; the motion over a long gap (``sample_gap``) is sampled before the set
-is associated; every ``map_check.every`` seconds a robot's recent sets are aligned to the older map, and a robot the map disagrees with
-twice is moved. Each move redraws the robot's pose in every particle from the fit. The mapper
-calls these at fixed points of an update (:meth:`Corrections.before_step`,
-:meth:`Corrections.hold`, :meth:`Corrections.after_step`, :meth:`Corrections.forget`), so the
-rules can be replaced as one.
+One decision serves both occasions: a robot back from a gap (silent for longer than
+``relocalize_after``), and every ``map_check.every`` seconds each robot, is aligned to the older
+map, and whether it is where its filter says or lost is decided in every particle by the
+posterior odds of the two (:mod:`~mrslam_core.pipelines.central.map_move`); a lost robot takes a
+pose drawn from the alignment in the particles that find it lost. The motion over a long gap
+(``sample_gap``) is sampled before the set is associated. The mapper calls these at fixed points
+of an update (:meth:`Corrections.before_step`, :meth:`Corrections.hold`,
+:meth:`Corrections.after_step`, :meth:`Corrections.forget`).
 """
 
 from __future__ import annotations
@@ -20,14 +21,21 @@ import numpy as np
 
 from mrslam_core.geometry.se2 import between, compose, wrap_angle
 from mrslam_core.pipelines.central.config import CentralConfig
+from mrslam_core.pipelines.central.map_move import (MoveResult, candidate_pairs, frame_log_likelihood, lost_or_not,
+                                                   refine)
 from mrslam_core.pipelines.central.ordering import Pairing
 from mrslam_core.pipelines.central.state import set_from_state, sets_state
 from mrslam_core.slam.filter import FilterInputError, MultiRobotFastSLAM, RobotUpdate
 from mrslam_core.types import ObservationSet
 
+#: χ²(3 dof) at 0.99: the frame's refit near the estimate counts as the mode of "where the filter
+#: says" only within this Mahalanobis distance of the estimate under P + Σ_T (a refit that slid
+#: further, along a repetitive wall, is a mode of "lost", and the alignment stands for those)
+LOCAL_GATE = 11.34
+
 
 class Corrections:
-    """The gap re-localisation, the gap sampling and the map check, and what they remember.
+    """The placement after a gap, the gap sampling and the map check, and what they remember.
 
     Args:
         cfg: ``relocalize_*``, ``sample_gap``, ``map_check``, ``fusion`` and the filter's
@@ -43,9 +51,12 @@ class Corrections:
 
     Attributes:
         relocalizations: every re-localisation after a gap (cause "gap": robot, stamp_ns, gap_s,
-            travelled_m, accepted, reason, inliers, shift_m) and every move by a map check
-            (cause "map_check": also turn_rad, estimate_inliers, fit_support, transform).
-        map_checks: map checks made, by outcome (see :class:`MapCheckConfig`).
+            travelled_m, accepted (an alignment was weighed), reason, inliers, shift_m (the fit
+            from the dead-reckoned pose), lost (share of particles that found the robot lost and
+            moved it), p_lost (mean posterior probability of lost)) and every move by a map check
+            (cause "map_check": the robot lost in most particles; also turn_rad, transform).
+        map_checks: map checks made, by outcome: too_few_points, no_fit (no alignment),
+            agreed (the robot is where its filter says in most particles), moved.
         distrusted: (robot index, from_ns, to_ns): landmarks that robot made in that time, left
             out of map checks (``map_check.distrust_moved``).
     """
@@ -68,8 +79,6 @@ class Corrections:
         self._recent: dict[str, deque[tuple[int, np.ndarray, ObservationSet]]] = {r: deque() for r in robots}
         #: stamp of each robot's last map check [ns]
         self._checked: dict[str, int] = {}
-        #: each robot's last disagreeing fit, waiting for the next check: (stamp_ns, pose, fit (3,))
-        self._pending: dict[str, tuple[int, np.ndarray, np.ndarray]] = {}
         #: each robot's last agreeing map check [ns]
         self._agreed: dict[str, int] = {}
 
@@ -103,7 +112,7 @@ class Corrections:
 
     def forget(self, robot: str) -> None:
         """Drop what is remembered of ``robot`` (its odometry restarted: it is mapped anew)."""
-        for state in (self._returning, self._reloc_tried, self._checked, self._pending, self._agreed):
+        for state in (self._returning, self._reloc_tried, self._checked, self._agreed):
             state.pop(robot, None)
         self._recent[robot].clear()
 
@@ -181,12 +190,13 @@ class Corrections:
         entry.update(reason=al.reason, inliers=int(len(al.inliers)))
         if not al.accepted:
             return False
-        shift = float(np.hypot(*(al.transform[:2] - dead[:2])))
-        entry["shift_m"] = shift
-        if shift > limit:
-            entry["reason"] = f"the fit is {shift:.2f} m from the dead-reckoned pose (gate {limit:.2f} m)"
-            return False
-        self._redraw(slam, obs.robot, al.transform, al.cov, (0.02, 0.01))  # a floor for a fit of few points
+        entry["shift_m"] = float(np.hypot(*(al.transform[:2] - dead[:2])))
+        # where the odometry puts it over the gap, in each particle, against lost within the gate
+        placed = compose(slam.poses[:, k], motion)
+        sigma_xy = self.cfg.map_check.sigma_xy + self.cfg.relocalize_drift * travelled
+        res = self._decide(slam, k, placed, frame, world, al, sigma_xy, limit)
+        entry.update(lost=float(res.lost.mean()), p_lost=float(res.p_lost.mean()))
+        slam.add_robot(obs.robot, res.poses)
         entry["accepted"] = True
         return True
 
@@ -209,7 +219,7 @@ class Corrections:
         if obs.stamp_ns - self._checked.get(obs.robot, -(1 << 62)) < mc.every * 1e9:
             return
         self._checked[obs.robot] = int(obs.stamp_ns)
-        from mrslam_core.fusion.alignment import explained, ransac_align
+        from mrslam_core.fusion.alignment import ransac_align
         from mrslam_core.fusion.maps import FusionError
 
         frame = self._recent_frame(obs.robot, at)
@@ -223,48 +233,26 @@ class Corrections:
             al = None
         if al is None or not al.accepted:
             self.map_checks["no_fit"] += 1
-            self._pending.pop(obs.robot, None)
             return
-        shift = float(np.hypot(*(al.transform[:2] - est[:2])))
-        turn = float(wrap_angle(al.transform[2] - est[2]))
-        if shift <= mc.shift and abs(turn) <= mc.turn:
+        res = self._decide(slam, k, slam.poses[:, k].copy(), frame, world, al, mc.sigma_xy, mc.max_shift)
+        if res.lost.mean() <= 0.5:
             self.map_checks["agreed"] += 1
             self._agreed[obs.robot] = int(obs.stamp_ns)
-            self._pending.pop(obs.robot, None)
-            return
-        if shift > mc.max_shift or abs(turn) > mc.max_turn:
-            self.map_checks["too_far"] += 1
-            return
-        dist = self.cfg.fusion.inlier_distance
-        support = int(explained(est, world, frame, al.matches, dist, mc.gain_gate, mc.sigma_xy).sum())
-        fit_support = (int(explained(al.transform, world, frame, al.matches, dist, mc.gain_gate, mc.sigma_xy).sum())
-                       if mc.gain_gate > 0 else len(al.inliers))
-        if fit_support - support < mc.min_gain:
-            self.map_checks["ambiguous"] += 1
-            self._pending.pop(obs.robot, None)
-            return
-        # a fit of look-alikes disagrees once; the robot is moved when the next check's fit, from
-        # other sets, lands where the previous one said the robot would be by now
-        before = self._pending.get(obs.robot)
-        self._pending[obs.robot] = (int(obs.stamp_ns), at, al.transform)
-        if before is None or obs.stamp_ns - before[0] > 1.5 * mc.every * 1e9:
-            self.map_checks["unconfirmed"] += 1
-            return
-        then = compose(before[2], between(before[1], at))
-        if (np.hypot(*(then[:2] - al.transform[:2])) > mc.shift
-                or abs(float(wrap_angle(then[2] - al.transform[2]))) > mc.turn):
-            self.map_checks["unconfirmed"] += 1
-            return
-        del self._pending[obs.robot]
-        self.map_checks["moved"] += 1
-        if mc.distrust_moved:
-            self.distrusted.append((k, self._agreed.get(obs.robot, -1), int(obs.stamp_ns)))
-        self.relocalizations.append({"robot": obs.robot, "stamp_ns": int(obs.stamp_ns), "cause": "map_check",
-                                     "accepted": True, "reason": "", "inliers": int(len(al.inliers)),
-                                     "estimate_inliers": support, "fit_support": fit_support,
-                                     "shift_m": shift, "turn_rad": turn,
-                                     "transform": [float(v) for v in al.transform]})
-        self._redraw(slam, obs.robot, al.transform, al.cov, (mc.sigma_xy, mc.sigma_theta), int(obs.stamp_ns))
+        else:
+            self.map_checks["moved"] += 1
+            if mc.distrust_moved:
+                self.distrusted.append((k, self._agreed.get(obs.robot, -1), int(obs.stamp_ns)))
+            self.relocalizations.append({
+                "robot": obs.robot, "stamp_ns": int(obs.stamp_ns), "cause": "map_check", "accepted": True,
+                "reason": "", "inliers": int(len(al.inliers)), "lost": float(res.lost.mean()),
+                "p_lost": float(res.p_lost.mean()), "shift_m": float(np.hypot(*(al.transform[:2] - est[:2]))),
+                "turn_rad": float(wrap_angle(al.transform[2] - est[2])),
+                "transform": [float(v) for v in al.transform]})
+        slam.poses[:, k] = res.poses
+        if res.lost.mean() > 0.5:
+            slam.tracks.pop(k, None)  # its tracks went to landmarks seen from the old poses
+            if mc.poses == "estimate":  # the recent sets were placed by the poses just replaced
+                self._recent[obs.robot].clear()
 
     def map_near(self, slam: MultiRobotFastSLAM, pose: np.ndarray, points: np.ndarray, margin: float,
                  born_before: float | None = None):
@@ -284,18 +272,42 @@ class Corrections:
                 keep &= ~((maker == k) & (born >= t0) & (born <= t1))
         return world.subset(np.flatnonzero(keep))
 
-    def _redraw(self, slam: MultiRobotFastSLAM, robot: str, fit: np.ndarray, cov: np.ndarray,
-                floor: tuple[float, float], stamp_ns: int | None = None) -> None:
-        """Draw ``robot``'s pose in every particle from N(fit (3,), cov (3, 3) + diag(floor)²),
-        floor = (σ_xy [m], σ_θ [rad]); ``stamp_ns``: the time of those poses (None: no history)."""
-        cov = np.nan_to_num(cov) + np.diag([floor[0] ** 2, floor[0] ** 2, floor[1] ** 2])
-        chol = np.linalg.cholesky(0.5 * (cov + cov.T))
-        draws = fit + (chol @ slam.rng.standard_normal((slam.num_particles, 3, 1)))[..., 0]
-        draws[:, 2] = wrap_angle(draws[:, 2])
-        slam.add_robot(robot, draws, stamp_ns=stamp_ns)
-        if self.cfg.map_check.poses == "estimate":  # the recent sets were placed by the poses just replaced
-            self._recent[robot].clear()
-            self._pending.pop(robot, None)
+    def _decide(self, slam: MultiRobotFastSLAM, k: int, poses: np.ndarray, frame, world, al,
+                sigma_xy: float, max_shift: float) -> MoveResult:
+        """Robot k at ``poses`` (M, 3) or lost within ``max_shift`` [m]: the decision of
+        :func:`~.map_move.lost_or_not` for ``frame`` (its base_link) against ``world`` (the
+        older map, best particle's rows; each particle's own landmarks are read at those slots),
+        with the alignment ``al`` as the lost robot's proposal and ``sigma_xy`` [m] added to the
+        spread of its particles."""
+        mc, fusion = self.cfg.map_check, self.cfg.fusion
+        pairs = candidate_pairs(world.descriptors, frame.descriptors, fusion.descriptor_threshold, mc.candidates)
+        m = slam.num_particles
+        mean, cov, held = slam.landmarks.gather(np.arange(m)[:, None], world.ids[pairs[:, 0]][None],
+                                                ("mean", "cov", "exists"))
+        reach = max_shift + float(np.linalg.norm(frame.means[:, :2], axis=1).max()) + fusion.inlier_distance
+        log_area = float(np.log(np.pi * reach**2))
+
+        def log_lik(x: np.ndarray) -> np.ndarray:
+            return frame_log_likelihood(x, frame.means, frame.covs, pairs, mean, cov, held,
+                                        mc.outlier_probability, log_area, mc.sigma_xy)
+
+        floor = np.diag([sigma_xy**2, sigma_xy**2, mc.sigma_theta**2])
+        w = np.exp(slam.log_w)
+        centre = np.einsum("m,mi->i", w, poses)
+        centre[2] = np.arctan2(w @ np.sin(poses[:, 2]), w @ np.cos(poses[:, 2]))
+        dev = poses - centre
+        dev[:, 2] = wrap_angle(dev[:, 2])
+        spread = np.einsum("m,mi,mj->ij", w, dev, dev) + floor
+        fit_cov = np.nan_to_num(al.cov) + np.diag([mc.sigma_xy**2, mc.sigma_xy**2, mc.sigma_theta**2])
+        fit_cov = 0.5 * (fit_cov + fit_cov.T)
+        local = refine(centre, frame.means[:, :2], world.means[:, :2], pairs, fusion.inlier_distance)
+        if local is not None:  # the mode of "where the filter says" lies within that hypothesis's prior
+            d = local - centre
+            d[2] = wrap_angle(d[2])
+            if d @ np.linalg.solve(spread + fit_cov, d) > LOCAL_GATE:
+                local = None
+        return lost_or_not(poses, spread, al.transform, fit_cov, log_lik, mc.lost_probability,
+                           max_shift, mc.max_turn, slam.rng, local)
 
     def _recent_frame(self, robot: str, pose: np.ndarray):
         """The robot's recent sets as one :class:`LandmarkMap` in its base_link at ``pose`` (3,)
@@ -321,8 +333,7 @@ class Corrections:
     def state(self) -> dict[str, Any]:
         """Everything above as JSON values and arrays: ``relocalizations``, ``map_checks``,
         ``distrusted``, ``returning`` (robot: [attempts left, gap start ns]),
-        ``reloc_tried``, ``checked``, ``agreed``, ``pending`` (robot: [stamp_ns, pose (3), fit (3)]),
-        ``recent`` ([robot, stamp_ns, pose (3)] in each robot's order) with the sets' arrays
+        ``reloc_tried``, ``checked``, ``agreed``, ``recent`` ([robot, stamp_ns, pose (3)] in each robot's order) with the sets' arrays
         (``recent_*_{i}``)."""
         recent = [(r, s, at, o) for r in self.robots for s, at, o in self._recent[r]]
         return {
@@ -330,7 +341,6 @@ class Corrections:
             "distrusted": [list(d) for d in self.distrusted],
             "returning": {r: list(v) for r, v in self._returning.items()}, "reloc_tried": dict(self._reloc_tried),
             "checked": dict(self._checked), "agreed": dict(self._agreed),
-            "pending": {r: [s, *map(float, at), *map(float, fit)] for r, (s, at, fit) in self._pending.items()},
             "recent": [[r, s, *map(float, at)] for r, s, at, _ in recent],
             **sets_state("recent", [o for *_, o in recent]),
         }
@@ -345,8 +355,6 @@ class Corrections:
         self._reloc_tried = {r: int(v) for r, v in state.get("reloc_tried", {}).items()}
         self._checked = {r: int(v) for r, v in state.get("checked", {}).items()}
         self._agreed = {r: int(v) for r, v in state.get("agreed", {}).items()}
-        self._pending = {r: (int(v[0]), np.array(v[1:4], float), np.array(v[4:7], float))
-                         for r, v in state.get("pending", {}).items()}
         for i, (robot, stamp, *at) in enumerate(state.get("recent", [])):
             obs = set_from_state(state, "recent", i, robot, stamp)
             self._recent[robot].append((int(stamp), np.array(at, float), obs))
