@@ -23,6 +23,9 @@ whether the map contradicts its pose, and answers through probabilities, not thr
   (:func:`lost_or_not`). In each particle the robot is found lost with its posterior
   probability, and a lost robot's pose is drawn at its best mode.
 
+The particle weights are left as they are: the frame's points were weighed by the filter when
+they came; the decision only chooses, per particle, which hypothesis its pose follows.
+
 A robot the map agrees with stays where it is; one the older map places elsewhere is moved when
 the evidence outweighs the prior odds ε/(1 − ε): the fit must be improbable under the filter's
 spread P and explain the frame at least as well as the filter's pose.
@@ -93,15 +96,17 @@ def frame_log_likelihood(
     if pairs.size == 0:
         return np.zeros((m, n_pose))
     rows = pairs[:, 1]
-    f = points[rows, :2]
-    c, s = np.cos(poses[..., 2]), np.sin(poses[..., 2])
-    rot = np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], -2)  # (M, S, 2, 2)
-    r = np.einsum("msij,pj->mspi", rot, f) + poses[:, :, None, :2] - lm_mean[:, None, :, :2]
-    cov = (lm_cov[:, None, :, :2, :2] + np.einsum("msij,pjk,mslk->mspil", rot, point_covs[rows, :2, :2], rot)
-           + floor**2 * np.eye(2))
-    det = cov[..., 0, 0] * cov[..., 1, 1] - cov[..., 0, 1] * cov[..., 1, 0]
-    quad = (cov[..., 1, 1] * r[..., 0] ** 2 - 2 * cov[..., 0, 1] * r[..., 0] * r[..., 1]
-            + cov[..., 0, 0] * r[..., 1] ** 2) / det
+    fx, fy = points[rows, 0], points[rows, 1]  # (P,)
+    c, s = np.cos(poses[..., 2])[..., None], np.sin(poses[..., 2])[..., None]  # (M, S, 1)
+    rx = c * fx - s * fy + poses[..., 0:1] - lm_mean[:, None, :, 0]  # (M, S, P)
+    ry = s * fx + c * fy + poses[..., 1:2] - lm_mean[:, None, :, 1]
+    a, b, d = point_covs[rows, 0, 0], point_covs[rows, 0, 1], point_covs[rows, 1, 1]
+    floor2 = floor**2
+    cxx = a * c * c - 2 * b * c * s + d * s * s + lm_cov[:, None, :, 0, 0] + floor2  # R Σ Rᵀ + Σ_lm + σ² I
+    cyy = a * s * s + 2 * b * c * s + d * c * c + lm_cov[:, None, :, 1, 1] + floor2
+    cxy = (a - d) * c * s + b * (c * c - s * s) + lm_cov[:, None, :, 0, 1]
+    det = cxx * cyy - cxy * cxy
+    quad = (cyy * rx * rx - 2 * cxy * rx * ry + cxx * ry * ry) / det
     log_n = np.where(held[:, None], -0.5 * (quad + np.log(det)) - LOG_2PI, -np.inf)  # (M, S, P)
     starts = np.flatnonzero(np.r_[True, rows[1:] != rows[:-1]])
     count = np.diff(np.r_[starts, rows.size])
