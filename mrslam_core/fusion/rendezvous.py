@@ -33,7 +33,7 @@ from mrslam_core.fusion.alignment import explained, match_descriptors
 from mrslam_core.fusion.config import FusionConfig
 from mrslam_core.fusion.join import JoinResult, join_filters
 from mrslam_core.fusion.maps import LandmarkMap
-from mrslam_core.geometry.se2 import compose, inverse, wrap_angle
+from mrslam_core.geometry.se2 import compose, inverse, pose_moments, wrap_angle
 from mrslam_core.slam.filter import MultiRobotFastSLAM
 
 
@@ -154,11 +154,7 @@ def transform_spread(transforms: np.ndarray, log_w: np.ndarray | None = None) ->
     deviations wrapped): the Cov T a particle-by-particle join actually realised."""
     t = np.asarray(transforms, float)
     w = np.full(len(t), 1.0 / len(t)) if log_w is None else np.exp(log_w - np.logaddexp.reduce(log_w))
-    mean = w @ t
-    mean[2] = np.arctan2(w @ np.sin(t[:, 2]), w @ np.cos(t[:, 2]))
-    d = t - mean
-    d[:, 2] = wrap_angle(d[:, 2])
-    return (w[:, None] * d).T @ d
+    return pose_moments(t, w)[1]
 
 
 def transform_distance(a: Rendezvous, b: Rendezvous) -> float:

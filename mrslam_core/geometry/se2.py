@@ -38,6 +38,16 @@ def between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return compose(inverse(a), b)
 
 
+def pose_moments(poses: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Weighted mean (3,) and covariance (3, 3) of poses (M, 3) with weights w (M,) summing to 1:
+    θ by its circular mean, deviations wrapped."""
+    mean = w @ poses
+    mean[2] = np.arctan2(w @ np.sin(poses[:, 2]), w @ np.cos(poses[:, 2]))
+    d = poses - mean
+    d[:, 2] = wrap_angle(d[:, 2])
+    return mean, (w[:, None] * d).T @ d
+
+
 def transform_points(pose: np.ndarray, pts: np.ndarray) -> np.ndarray:
     """Points (..., N, 2 or 3) in the pose's frame -> parent frame; z (if any) unchanged.
 

@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from mrslam_core.geometry.se2 import between, compose, wrap_angle
+from mrslam_core.geometry.se2 import between, compose, pose_moments, wrap_angle
 from mrslam_core.pipelines.central.config import CentralConfig
 from mrslam_core.pipelines.central.map_move import (MoveResult, candidate_pairs, frame_log_likelihood, lost_or_not,
                                                    refine)
@@ -235,7 +235,8 @@ class Corrections:
             self.map_checks["no_fit"] += 1
             return
         res = self._decide(slam, k, slam.poses[:, k].copy(), frame, world, al, mc.sigma_xy, mc.max_shift)
-        if res.lost.mean() <= 0.5:
+        moved = res.lost.mean() > 0.5
+        if not moved:
             self.map_checks["agreed"] += 1
             self._agreed[obs.robot] = int(obs.stamp_ns)
         else:
@@ -248,8 +249,9 @@ class Corrections:
                 "p_lost": float(res.p_lost.mean()), "shift_m": float(np.hypot(*(al.transform[:2] - est[:2]))),
                 "turn_rad": float(wrap_angle(al.transform[2] - est[2])),
                 "transform": [float(v) for v in al.transform]})
-        slam.poses[:, k] = res.poses
-        if res.lost.mean() > 0.5:
+        if res.lost.any():
+            slam.poses[:, k] = res.poses
+        if moved:
             slam.tracks.pop(k, None)  # its tracks went to landmarks seen from the old poses
             if mc.poses == "estimate":  # the recent sets were placed by the poses just replaced
                 self._recent[obs.robot].clear()
@@ -291,13 +293,8 @@ class Corrections:
             return frame_log_likelihood(x, frame.means, frame.covs, pairs, mean, cov, held,
                                         mc.outlier_probability, log_area, mc.sigma_xy)
 
-        floor = np.diag([sigma_xy**2, sigma_xy**2, mc.sigma_theta**2])
-        w = np.exp(slam.log_w)
-        centre = np.einsum("m,mi->i", w, poses)
-        centre[2] = np.arctan2(w @ np.sin(poses[:, 2]), w @ np.cos(poses[:, 2]))
-        dev = poses - centre
-        dev[:, 2] = wrap_angle(dev[:, 2])
-        spread = np.einsum("m,mi,mj->ij", w, dev, dev) + floor
+        centre, spread = pose_moments(poses, np.exp(slam.log_w))
+        spread = spread + np.diag([sigma_xy**2, sigma_xy**2, mc.sigma_theta**2])
         fit_cov = np.nan_to_num(al.cov) + np.diag([mc.sigma_xy**2, mc.sigma_xy**2, mc.sigma_theta**2])
         fit_cov = 0.5 * (fit_cov + fit_cov.T)
         local = refine(centre, frame.means[:, :2], world.means[:, :2], pairs, fusion.inlier_distance)
@@ -333,8 +330,8 @@ class Corrections:
     def state(self) -> dict[str, Any]:
         """Everything above as JSON values and arrays: ``relocalizations``, ``map_checks``,
         ``distrusted``, ``returning`` (robot: [attempts left, gap start ns]),
-        ``reloc_tried``, ``checked``, ``agreed``, ``recent`` ([robot, stamp_ns, pose (3)] in each robot's order) with the sets' arrays
-        (``recent_*_{i}``)."""
+        ``reloc_tried``, ``checked``, ``agreed``, ``recent`` ([robot, stamp_ns, pose (3)] in each
+        robot's order) with the sets' arrays (``recent_*_{i}``)."""
         recent = [(r, s, at, o) for r in self.robots for s, at, o in self._recent[r]]
         return {
             "relocalizations": [dict(e) for e in self.relocalizations], "map_checks": dict(self.map_checks),

@@ -39,8 +39,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from mrslam_core.geometry.se2 import wrap_angle
-
-LOG_2PI = float(np.log(2 * np.pi))
+from mrslam_core.slam.models import LOG_2PI
 
 
 @dataclass(frozen=True)
