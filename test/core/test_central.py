@@ -269,7 +269,7 @@ def test_a_robot_with_an_unknown_start_is_merged_and_then_localised_in_the_map()
     starts = world.start_poses()
     cfg = CentralConfig(robots=("robot1", "robot2"), start_poses=(*starts[0], 9.0, 9.0, 9.0),  # robot2's: not used
                         unknown_start=("robot2",), merge_every=5,
-                        filter=FilterConfig(num_particles=50, seed=2), fusion=FusionConfig(min_inliers=5))
+                        filter=FilterConfig(num_particles=50, seed=2), fusion=FusionConfig())
     m = CentralMapper(cfg)
     odom = {r: np.zeros(3) for r in world.robots}
     for r in world.robots:
@@ -461,7 +461,7 @@ def _restart_run(reset_speed: float, restart_at: int = 30, steps: int = 90,
     world = SyntheticWorld(SyntheticWorldConfig(num_robots=2, seed=5))
     cfg = CentralConfig(robots=("robot1", "robot2"), start_poses=tuple(world.start_poses().ravel()),
                         merge_every=5, odom_reset_speed=reset_speed,
-                        filter=FilterConfig(num_particles=50, seed=2), fusion=FusionConfig(min_inliers=5))
+                        filter=FilterConfig(num_particles=50, seed=2), fusion=FusionConfig())
     m = CentralMapper(cfg)
     odom = {r: np.zeros(3) for r in world.robots}
     for r in world.robots:

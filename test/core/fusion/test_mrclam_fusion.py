@@ -34,7 +34,7 @@ def test_unknown_start_robots_are_merged_and_tracked(mrclam6):
     assert sorted(merged) == ["robot2", "robot3", "robot4", "robot5"], res["attempts"]
     assert merged["robot3"]["via"].startswith("rendezvous") and merged["robot3"]["time_s"] < 30
     # one mutual sighting is held, not trusted: robot 3 joins on the second that agrees
-    assert any("held until a second one" in a for a in res["attempts"]["robot3"]), res["attempts"]["robot3"]
+    assert any("held until a second piece of evidence" in a for a in res["attempts"]["robot3"]), res["attempts"]["robot3"]
     t0 = res["times"][0]
     first = {"robot1": 0, **{r: m["step"] for r, m in merged.items()}}
     free, _ = gauge_free(res["est"], res["gt"], first)
