@@ -47,7 +47,7 @@ def _mrclam_fusion() -> FusionConfig:
     # FastSLAM 2.0 proposal and the moved landmarks' covariances (docs/fusion.md), not into
     # per-particle transform draws; an alignment whose error the joined cloud cannot hold then
     # waits for a sighting that agrees.
-    return FusionConfig(source_outliers="drop", transform_uncertainty="proposal", transform_sampling_scale=0.0)
+    return FusionConfig(source_outliers="drop", transform_uncertainty="proposal")
 
 
 def pinned_filter() -> FilterConfig:

@@ -7,30 +7,45 @@ the two maps) or a rendezvous (a mutual sighting with a robot of the common filt
 
 1. **Geometric consistency** (:func:`chi2_align`). Each matched landmark pair (c in the common
    map, l in the local one) leaves the residual rᵢ = R·lᵢ + t − cᵢ with covariance
-   Sᵢ = Σ_c,i + R·Σ_l,i·Rᵀ, both Σ the landmark's marginal covariance in its own filter (the
+   Sᵢ = Σ_c,i + R·Σ_l,i·Rᵀ + u²I, both Σ the landmark's marginal covariance in its own filter (the
    particles' mixture, :func:`marginal_landmarks`: the per-particle EKF covariance plus the spread
-   of the particles' means, i.e. the part of the robot's path uncertainty its map inherits). A
-   pair is an inlier when rᵢᵀ(Sᵢ + Jᵢ·Cov T·Jᵢᵀ)⁻¹rᵢ ≤ χ²₂(p), Jᵢ = ∂rᵢ/∂T (the transform's own
-   uncertainty: from the two pairs of a RANSAC hypothesis, then from the fit). The transform is the generalised least-squares fit
-   on the inliers (Gauss-Newton with the full Sᵢ⁻¹), and the alignment is consistent when
-     - Σ rᵢᵀSᵢ⁻¹rᵢ ≤ χ²_{2n−3}(p) over its n inliers (2n residuals, 3 parameters), and
+   of the particles' means, i.e. the part of the robot's path uncertainty its map inherits) and
+   u² one planar variance [m²] shared by every pair: what the maps' covariances leave out. A
+   collapsed particle cloud keeps almost none of the path uncertainty, so a young stereo map's
+   landmarks are placed relative to each other far less well than their covariances say (the
+   test_central world at its join: residuals 0.06–0.14 m against the simulator's truth where the
+   covariances give σ 0.009–0.079 m, NEES 4–401, median 185 for 2 dof; the residual does not
+   grow with Σ, so the missing part is added, not a scale). u² is estimated with T: the RANSAC
+   hypothesis and u² together by maximum likelihood of a contaminated normal over every match (a
+   match is right with probability 1 − ε and then rᵢ ~ N(0, Sᵢ + Jᵢ·Cov T·Jᵢᵀ), or wrong and
+   uniform over the target map's extent A; ε by EM; u² from a grid), then at each refinement
+   the same way at the fitted T (rᵢ ~ N(0, Sᵢ) for a right match; u² continuous). It is 0 when the maps explain their residuals (MR.CLAM's barcode maps, reduced χ² 0.015–0.1). A pair is an
+   inlier when rᵢᵀ(Sᵢ + Jᵢ·Cov T·Jᵢᵀ)⁻¹rᵢ ≤ χ²₂(p), Jᵢ = ∂rᵢ/∂T (the transform's own
+   uncertainty: from the two pairs of a RANSAC hypothesis, then from the fit). The transform is
+   the generalised least-squares fit on the inliers (Gauss-Newton with the full Sᵢ⁻¹), and the
+   alignment is consistent when
+     - Σ rᵢᵀSᵢ⁻¹rᵢ ≤ χ²_{2n−3}(p) over its n inliers (2n residuals, 3 parameters; with u > 0 the
+       sum is near 2n by construction, so consistency then rests on every inlier's gate under
+       one shared u and on the next test), and
      - the inlier set is not explainable by chance: any two matches fix a transform, so only the
        n − 2 further inliers are evidence. Under a wrong transform a match lands inside its gate
        with probability qᵢ = π χ²₂(p) √det Sᵢ / A (gate ellipse over the target map's extent A), so
        P(≥ n − 2 of the other P − 2 matches by chance) is a binomial tail; with the
-       C(P, 2) minimal sets RANSAC may choose from (Bonferroni), it must be ≤ 1 − p.
+       C(P, 2) minimal sets RANSAC may choose from (Bonferroni), it must be ≤ 1 − p. A larger u
+       widens every gate, so more inliers are needed.
    Its covariance is Cov T = (Σ Jᵢᵀ Sᵢ⁻¹ Jᵢ)⁻¹, scaled up by the reduced χ² when that exceeds 1.
 2. **Absorbable** (:func:`absorbable`). The transform's error moves the joined robot by
    J_T·Cov T·J_Tᵀ =: P_T (at its local pose). A particle join places robot i at T ⊕ xᵢ in every
    particle, so the transform's error is carried only as far as the joined cloud already spreads:
    the joining robot's own pose covariance (moved into the common frame) plus the pose spread with
-   which the common filter holds its robots (the frame's own uncertainty) plus what the join
-   itself spreads the joined particles by (s²·P_T when each draws its transform from
-   N(T, s²·Cov T), ``FusionConfig.transform_sampling_scale``), P_ref. With
+   which the common filter holds its robots (the frame's own uncertainty), P_ref. With
    e ~ N(0, P_T), E[eᵀP_ref⁻¹e] = tr(P_ref⁻¹P_T); the join is absorbable when that is at most the
    pose's 3 dof, i.e. the transform's error looks, on average, like one more draw of the cloud.
    A larger one would make the newcomer overconfident about a pose the common map cannot yet
    correct, and its observations would drag the shared landmarks (and every robot with them).
+   (Drawing each joined particle's transform from N(T, s²·Cov T) and counting s²·P_T into
+   P_ref would void the test: tr((P_ref + s²P_T)⁻¹P_T) < 3/s² for every P_ref, so with s = 1 every
+   consistent alignment passes.)
 3. **Agreement of independent evidence** (:class:`JoinGate`). An alignment that passes 1 and 2 is
    strong and may join alone; a rendezvous sighting, or an alignment that passes 1 but not 2, is
    weak and is held. A robot joins when a new piece of evidence agrees with a held independent
@@ -43,6 +58,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.optimize import minimize_scalar
 from scipy.special import comb
 from scipy.stats import binom, chi2
 
@@ -97,11 +113,13 @@ class GatedAlignment:
         cov: (3, 3) its covariance (NaN when undetermined).
         matches: (P, 2) descriptor matches (target row, source row).
         inliers: (I,) indices into ``matches`` inside their χ²₂ gate.
-        chi2: Σ rᵀS⁻¹r over the inliers; dof: 2I − 3.
+        chi2: Σ rᵀS⁻¹r over the inliers (S with u²); dof: 2I − 3.
         chance: probability that I − 2 further matches agree with a wrong transform by chance
             (Bonferroni over the C(P, 2) minimal sets).
         consistent: tests 1 passed (residual χ² and chance); reason: what failed, in words.
         rmse: planar RMSE of the inliers' residuals [m] (for the log).
+        unmodelled_sigma: u [m], the planar σ added to every pair's residual covariance for what
+            the maps' covariances leave out (0: they explain the residuals).
     """
 
     transform: np.ndarray
@@ -114,6 +132,7 @@ class GatedAlignment:
     consistent: bool
     reason: str = ""
     rmse: float = float("nan")
+    unmodelled_sigma: float = 0.0
 
     @property
     def inlier_pairs(self) -> np.ndarray:
@@ -174,10 +193,57 @@ def gls_refine(transform: np.ndarray, src: np.ndarray, dst: np.ndarray, cov_s: n
     return t, np.linalg.inv(info)
 
 
+#: unmodelled variances u² [m²] tried with every RANSAC hypothesis: 0, then 10⁻⁶ … 1 (σ 1 mm … 1 m) in steps of √10
+UNMODELLED_GRID = np.concatenate([[0.0], np.logspace(-6.0, 0.0, 13)])
+
+
+def contaminated_loglik(res: np.ndarray, cov: np.ndarray, area: float, iterations: int = 20) -> tuple[np.ndarray, np.ndarray]:
+    """Log-likelihood of residuals under a contaminated normal: each match is right with
+    probability 1 − ε (residual ~ N(0, S)) or wrong (uniform over ``area`` [m²]), ε by EM.
+
+    Args:
+        res: (..., P, 2) residuals [m]; cov: (..., P, 2, 2) their covariances S [m²].
+
+    Returns:
+        ((...) log-likelihood at the EM's ε, (...) ε).
+    """
+    det = cov[..., 0, 0] * cov[..., 1, 1] - cov[..., 0, 1] * cov[..., 1, 0]
+    log_n = -0.5 * mahalanobis2(res, cov) - np.log(2 * np.pi) - 0.5 * np.log(np.maximum(det, 1e-300))
+    log_out = -np.log(area)
+    eps = np.full(res.shape[:-2], 0.5)
+    for _ in range(iterations):
+        a = np.log1p(-eps)[..., None] + log_n
+        b = np.log(eps)[..., None] + log_out
+        w = np.exp(a - np.logaddexp(a, b))  # P(right | residual)
+        eps = np.clip(1.0 - w.mean(-1), 1e-6, 1 - 1e-6)
+    a = np.log1p(-eps)[..., None] + log_n
+    b = np.log(eps)[..., None] + log_out
+    return np.logaddexp(a, b).sum(-1), eps
+
+
+def unmodelled_variance(res: np.ndarray, cov: np.ndarray, area: float) -> float:
+    """The planar variance u² [m²] ≥ 0 that, added to every residual's covariance ``cov``
+    (P, 2, 2) [m²], makes the residuals ``res`` (P, 2) [m] most likely under
+    :func:`contaminated_loglik` (u searched from 0.1 mm to 1 m; 0 when that beats every u > 0).
+    Wrong matches count only through ε, so one of them does not inflate u²; for residuals of a
+    fit, u² is low by about the share of the fit's parameters (3 of the inliers' 2n coordinates)."""
+    eye = np.eye(2)
+
+    def nll(log_v: float) -> float:
+        return -float(contaminated_loglik(res, cov + 10.0**log_v * eye, area)[0])
+
+    opt = minimize_scalar(nll, bounds=(-8.0, 0.0), method="bounded", options={"xatol": 1e-3})
+    return 0.0 if nll(-np.inf) <= opt.fun else float(10.0**opt.x)
+
+
 def chi2_align(target: LandmarkMap, source: LandmarkMap, config: FusionConfig, matches: np.ndarray) -> GatedAlignment:
     """Align ``source`` to ``target`` over descriptor ``matches`` (P, 2) (target row, source row)
-    by the χ² tests of the module docstring (1): RANSAC over pairs of matches whose separations
-    agree (χ²₁), cost Σ min(rᵀS⁻¹r, χ²₂(p)) (MSAC), GLS refinement on the gated inliers.
+    by the tests of the module docstring (1): RANSAC over pairs of matches whose separations
+    agree (χ²₁, the maps' own covariances); the hypothesis and the unmodelled variance u² of
+    :data:`UNMODELLED_GRID` most likely under :func:`contaminated_loglik` (every match, each
+    residual with the hypothesis's own uncertainty); then, until the inlier set is stable, the
+    χ²₂(p) gates, the GLS fit on the inliers and u² again from every match's residual
+    (:func:`unmodelled_variance`).
     Only ``config.join_confidence`` p, ``ransac_iterations`` and ``seed`` are used."""
     p_conf = config.join_confidence
     matches = np.asarray(matches, np.int64).reshape(-1, 2)
@@ -218,25 +284,35 @@ def chi2_align(target: LandmarkMap, source: LandmarkMap, config: FusionConfig, m
     c_h = np.linalg.inv(info_h[ok])
     jac_all = transform_jacobian(hyp, np.broadcast_to(src, (len(hyp),) + src.shape))  # (H, P, 2, 3)
     pred = s_h + jac_all @ c_h[:, None] @ np.swapaxes(jac_all, -1, -2)
-    d2 = mahalanobis2(apply_transform(hyp, src[None]) - dst[None], pred)
-    h_best = int(np.argmin(np.minimum(d2, gate2).sum(1)))
-    best, cov_fit = hyp[h_best], c_h[h_best]
+    res_h = apply_transform(hyp, src[None]) - dst[None]  # (H, P, 2)
+    # a wrong match lands anywhere on the target map: density 1 / its extent
+    ext = np.ptp(target.means[:, :2], axis=0) if len(target) > 1 else np.zeros(2)
+    s0 = residual_covariances(0.0, cov_t, cov_s)
+    area = max(float(ext[0] * ext[1]), float((np.pi * gate2 * np.sqrt(np.maximum(np.linalg.det(s0), 0.0))).max()))
+    # each hypothesis with each unmodelled variance of the grid; the most likely pair
+    loglik = np.stack([contaminated_loglik(res_h, pred + v * np.eye(2), area)[0] for v in UNMODELLED_GRID])  # (G, H)
+    g_best, h_best = np.unravel_index(int(np.argmax(loglik)), loglik.shape)
+    best, cov_fit, u2 = hyp[h_best], c_h[h_best], float(UNMODELLED_GRID[g_best])
 
-    def gated(t: np.ndarray, c: np.ndarray) -> np.ndarray:
-        """Matches within χ²₂(p) of t with both landmarks' and the transform's covariance."""
+    def gated(t: np.ndarray, c: np.ndarray, v: float) -> np.ndarray:
+        """Matches within χ²₂(p) of t with both landmarks' covariance, the unmodelled variance v
+        [m²] and the transform's covariance."""
         jac = transform_jacobian(t, src)
-        cov = residual_covariances(t[2], cov_t, cov_s) + jac @ c @ jac.transpose(0, 2, 1)
+        cov = residual_covariances(t[2], cov_t, cov_s) + v * np.eye(2) + jac @ c @ jac.transpose(0, 2, 1)
         return np.flatnonzero(mahalanobis2(apply_transform(t, src) - dst, cov) <= gate2)
 
-    inl = gated(best, cov_fit)
-    for _ in range(5):
+    inl = gated(best, cov_fit, u2)
+    for _ in range(10):
         if inl.size < 2:
             break
-        best, cov_fit = gls_refine(best, src[inl], dst[inl], cov_s[inl], cov_t[inl])
-        new = gated(best, cov_fit)
-        if np.array_equal(new, inl):
+        best, cov_fit = gls_refine(best, src[inl], dst[inl], cov_s[inl], cov_t[inl] + u2 * np.eye(2))
+        u2_new = unmodelled_variance(apply_transform(best, src) - dst, residual_covariances(best[2], cov_t, cov_s), area)
+        new = gated(best, cov_fit, u2_new)
+        done = np.array_equal(new, inl) and abs(u2_new - u2) <= 1e-3 * max(u2, 1e-12)
+        inl, u2 = new, u2_new
+        if done:
             break
-        inl = new
+    cov_t = cov_t + u2 * np.eye(2)
     n = int(inl.size)
     if n < 2:
         return refuse(f"no two of {n_m} matches agree within their χ²₂({p_conf}) gates", best, inl)
@@ -245,10 +321,9 @@ def chi2_align(target: LandmarkMap, source: LandmarkMap, config: FusionConfig, m
     x2 = float(mahalanobis2(apply_transform(best, src[inl]) - dst[inl], s_in).sum())
     dof = 2 * n - 3
     # chance: each further match inside its gate ellipse, out of the target map's extent
-    ext = np.ptp(target.means[:, :2], axis=0) if len(target) > 1 else np.zeros(2)
     s_all = residual_covariances(best[2], cov_t, cov_s)
     ellipse = np.pi * gate2 * np.sqrt(np.maximum(np.linalg.det(s_all), 0.0))
-    area = max(float(ext[0] * ext[1]), float(ellipse.max()))
+    area = max(area, float(ellipse.max()))
     q = float(np.clip(ellipse / area, 0.0, 1.0).mean())
     chance = float(min(1.0, comb(n_m, 2) * binom.sf(n - 3, n_m - 2, q)))
     reason = ""
@@ -261,7 +336,7 @@ def chi2_align(target: LandmarkMap, source: LandmarkMap, config: FusionConfig, m
                   f"(gate {q:.3f} of the map's extent): explainable by chance")
     cov = cov_fit * max(1.0, x2 / dof) if dof > 0 else cov_fit
     rmse = float(np.sqrt(np.mean(((apply_transform(best, src[inl]) - dst[inl]) ** 2).sum(1))))
-    return GatedAlignment(best, cov, matches, inl, x2, dof, chance, reason == "", reason, rmse)
+    return GatedAlignment(best, cov, matches, inl, x2, dof, chance, reason == "", reason, rmse, float(np.sqrt(u2)))
 
 
 def pose_jacobian_transform(transform: np.ndarray, x: np.ndarray) -> np.ndarray:

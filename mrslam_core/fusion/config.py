@@ -48,12 +48,6 @@ class FusionConfig:
         pair_likelihood_temper: exponent (0..1] applied to that likelihood, so that a few very
             confident landmarks cannot collapse the joined population onto one pair.
         z_variance: variance [m²] given to z when a planar (2D) map is padded to 3D.
-        transform_sampling_scale: when joining, each particle draws its own transform from
-            N(T, (scale)²·Cov(T)) (0: every particle uses T). The joined cloud then holds
-            scale²·J_T·Cov T·J_Tᵀ of the transform's error itself, which the absorbability test
-            counts (:func:`~mrslam_core.fusion.join.assess_alignment`): with 1, every consistent
-            alignment may join alone (a filter whose particles have collapsed, as the stereo
-            mapper's often have, could otherwise never join on an alignment).
         per_particle_alignment: when joining, refit the transform for each (central particle,
             local particle) pair on its own copies of the inlier landmarks (004 section 5 fuses
             particle by particle; one transform from the best maps fits only the best particle).
@@ -113,7 +107,6 @@ class FusionConfig:
     pair_likelihood: bool = False
     pair_likelihood_temper: float = 1.0
     z_variance: float = 1.0
-    transform_sampling_scale: float = 1.0
     per_particle_alignment: bool = True
     join_pose_sigma: tuple[float, float, float] = (0.0, 0.0, 0.0)
     carry_landmarks: bool = True
@@ -138,8 +131,6 @@ class FusionConfig:
             raise ValueError("landmark_sigma must be > 0 or None")
         if not 0 < self.pair_likelihood_temper <= 1:
             raise ValueError("pair_likelihood_temper must be in (0, 1]")
-        if self.transform_sampling_scale < 0:
-            raise ValueError("transform_sampling_scale must be >= 0")
         if len(self.join_pose_sigma) != 3 or min(self.join_pose_sigma) < 0:
             raise ValueError("join_pose_sigma must be three values >= 0")
         if self.min_pair_spread is not None and self.min_pair_spread < 0:

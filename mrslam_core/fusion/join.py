@@ -311,8 +311,7 @@ def assess_alignment(
     Descriptor matches between the two best maps; each matched landmark at its marginal over its
     filter's particles; :func:`~mrslam_core.fusion.acceptance.chi2_align`; then the transform's
     covariance propagated to the robot's local pose against the spread the joined cloud carries
-    (the particles' own, plus ``transform_sampling_scale``² of it when the join draws each
-    particle's transform from N(T, Cov T)).
+    (:func:`~mrslam_core.fusion.acceptance.reference_spread`).
 
     Returns:
         (the alignment, the evidence it gives — None when inconsistent; ``strong`` when
@@ -330,9 +329,7 @@ def assess_alignment(
     x_local = local.estimate().mean[kl]
     jt = pose_jacobian_transform(al.transform, x_local)
     p_t = jt @ al.cov @ jt.T
-    # a join that draws each particle's transform from N(T, s²·Cov T) spreads the joined cloud by s²·P_T itself
-    imposed = config.transform_sampling_scale**2 * p_t
-    load = absorbable(p_t, reference_spread(central, local, kl, al.transform) + imposed)
+    load = absorbable(p_t, reference_spread(central, local, kl, al.transform))
     strong = load <= 3.0
     reason = "" if strong else (
         f"{al.inliers.size} inliers: the transform's error at the robot is {load:.1f} times the spread "
@@ -347,12 +344,12 @@ def join_alignment(
 ) -> JoinResult:
     """Join ``local`` into ``central`` with an alignment from :func:`assess_alignment`: its
     inlier landmarks matched, its other matches per ``config.source_outliers``, Cov T per
-    ``config.transform_uncertainty``."""
+    ``config.transform_uncertainty`` (every joined particle uses T, refitted per pair with
+    ``config.per_particle_alignment``)."""
     inl = al.inlier_pairs
     pairs = np.column_stack([target.ids[inl[:, 0]], source.ids[inl[:, 1]]])
     drop = source.ids[al.outlier_pairs[:, 1]] if config.source_outliers == "drop" else None
-    sampled = al.cov * config.transform_sampling_scale**2 if config.transform_sampling_scale > 0 else None
-    return join_filters(central, local, al.transform, pairs, config, robot, drop, 0.0, sampled,
+    return join_filters(central, local, al.transform, pairs, config, robot, drop, 0.0, None,
                         config.per_particle_alignment, pose_cov=al.cov)
 
 
@@ -362,21 +359,23 @@ def try_join(
 ) -> tuple[GatedAlignment, JoinResult | None]:
     """Align the local filter's map to the central one and join it if the evidence suffices.
 
-    Without ``gate`` only a strong alignment (consistent and absorbable) joins. With ``gate``
-    (one per team, shared with rendezvous sightings) the alignment is offered to it at
-    ``time_s`` [s]: a strong one joins unless held evidence contradicts it, a weak one is held
-    until another piece agrees.
+    With ``gate`` (one per team, shared with rendezvous sightings) the alignment is offered to it
+    at ``time_s`` [s]: a strong one (consistent and absorbable) joins unless held evidence
+    contradicts it, a weak one (consistent, not absorbable) is held until a sighting agrees.
+    Without ``gate`` the pipeline has no second, independent source of evidence (the stereo
+    central mapper: no sightings), so holding a weak alignment could never end in its
+    confirmation — later alignments of the same two maps are not independent of it — while the
+    local map drifts on: every consistent alignment joins, and a weak one says so in ``reason``.
 
     Returns:
-        (the alignment — its ``reason`` says why nothing was joined —, the join or None).
+        (the alignment — its ``reason`` says why nothing was joined, or that a weak one was —,
+        the join or None).
     """
     name = robot or local.robots[0]
     al, ev, target, source = assess_alignment(central, local, config, robot)
     if ev is None:
         return al, None
-    if gate is None:
-        if not ev.strong:
-            return al, None
-    elif gate.offer(name, time_s, ev) is None:
+    if gate is not None and gate.offer(name, time_s, ev) is None:
         return replace(al, reason=gate.log[name][-1]), None
-    return replace(al, reason=""), join_alignment(central, local, al, target, source, config, robot)
+    reason = "" if ev.strong or gate is not None else f"joined without independent evidence: {al.reason}"
+    return replace(al, reason=reason), join_alignment(central, local, al, target, source, config, robot)

@@ -1,4 +1,4 @@
-"""The χ² acceptance of joins (issue 28): exact residual sums, the chance test, the transform's
+"""The χ² acceptance of joins (issue 28): exact residual sums, the unmodelled variance, the chance test, the transform's
 covariance against the joined cloud, and independent evidence that must agree.
 
 Frames: planar, x right, y up; T maps the source (local) map into the target (common) map."""
@@ -15,6 +15,7 @@ from mrslam_core.fusion.acceptance import (
     chi2_align,
     marginal_landmarks,
     pose_jacobian_transform,
+    unmodelled_variance,
 )
 from mrslam_core.fusion.alignment import apply_transform, transform_information_covariance
 from mrslam_core.fusion.config import FusionConfig
@@ -40,23 +41,52 @@ def offset_maps(eps: float, n_extra: int = 0):
     return LandmarkMap.from_arrays(dst, cov), LandmarkMap.from_arrays(src, cov)
 
 
-@pytest.mark.parametrize("target_x2, passes", [(14.0, True), (16.0, False)])
-def test_the_residual_sum_is_tested_against_chi2_with_2n_minus_3_dof(target_x2, passes):
-    """χ² = 4·eps²/(2σ²) with dof 2·4 − 3 = 5, whose 0.99 quantile is 15.09: 14 passes, 16 fails
-    (each pair alone, 3.5 and 4, is inside its χ²₂ gate 9.21)."""
-    eps = np.sqrt(target_x2 * 2 * SIGMA**2 / 4)
+def test_residuals_the_maps_explain_leave_no_unmodelled_variance():
+    """Each of the 4 residuals of length eps with eps² = 2σ², i.e. σ² per coordinate against the
+    covariance 2σ² the two maps give: u = 0, χ² = 4·eps²/(2σ²) = 4 exactly with dof 2·4 − 3 = 5,
+    and Cov T is the landmark-covariance form (reduced χ² below 1)."""
+    eps = np.sqrt(2 * SIGMA**2)
     tgt, src = offset_maps(eps)
     al = chi2_align(tgt, src, FusionConfig(), np.column_stack([np.arange(4), np.arange(4)]))
     np.testing.assert_allclose(al.transform, T, atol=1e-9)
-    assert al.inliers.size == 4 and al.dof == 5
-    assert al.chi2 == pytest.approx(target_x2, rel=1e-9)
+    assert al.unmodelled_sigma == 0.0 and al.inliers.size == 4 and al.dof == 5 and al.consistent
+    assert al.chi2 == pytest.approx(4.0, rel=1e-9)
+    np.testing.assert_allclose(al.cov, transform_information_covariance(T, src.means, src.covs, tgt.covs), rtol=1e-6, atol=1e-15)
+
+
+def test_a_disagreement_every_pair_shares_is_an_unmodelled_variance():
+    """The same with eps² = 8σ² (χ² 16 on the maps' covariances, above χ²₅(0.99) = 15.09): the
+    residuals hold 4σ² per coordinate, so the most likely shared variance is u² = 4σ² − 2σ² = 2σ².
+    With it every pair is an inlier, χ² = 4·8σ²/4σ² = 8 with dof 5, and Cov T is the information
+    form with S + u²I, times the reduced χ² 8/5."""
     assert chi2.ppf(0.99, 5) == pytest.approx(15.086, abs=1e-3)
-    assert al.consistent is passes
-    if not passes:
-        assert "χ²" in al.reason and "disagree" in al.reason
-    # Cov T: the landmark-covariance form, inflated by the reduced χ² when above 1
-    info_cov = transform_information_covariance(T, src.means, src.covs, tgt.covs)
-    np.testing.assert_allclose(al.cov, info_cov * max(1.0, target_x2 / 5), rtol=1e-6, atol=1e-15)
+    eps = np.sqrt(8 * SIGMA**2)
+    tgt, src = offset_maps(eps)
+    al = chi2_align(tgt, src, FusionConfig(), np.column_stack([np.arange(4), np.arange(4)]))
+    np.testing.assert_allclose(al.transform, T, atol=1e-9)
+    assert al.unmodelled_sigma**2 == pytest.approx(2 * SIGMA**2, rel=1e-2)
+    assert al.inliers.size == 4 and al.dof == 5 and al.consistent
+    assert al.chi2 == pytest.approx(8.0, rel=1e-2)
+    u2 = al.unmodelled_sigma**2
+    info_cov = transform_information_covariance(T, src.means, src.covs + 0.5 * u2 * np.eye(3), tgt.covs + 0.5 * u2 * np.eye(3))
+    np.testing.assert_allclose(al.cov, info_cov * al.chi2 / 5, rtol=1e-6, atol=1e-15)
+
+
+def test_the_unmodelled_variance_is_recovered_from_heterogeneous_covariances():
+    """400 residuals ~ N(0, Sᵢ + u²I), Sᵢ's σ spread over 1–80 mm (a young stereo map), u = 0.05 m,
+    10 % of them wrong matches (uniform over 20 × 20 m): u is recovered within 10 %, and with u = 0
+    (residuals inside their covariances) it is 0."""
+    rng = np.random.default_rng(3)
+    n, area = 400, 400.0
+    sig = np.exp(rng.uniform(np.log(0.001), np.log(0.08), n))
+    cov = np.einsum("n,ij->nij", sig**2, np.eye(2))
+    wrong = rng.random(n) < 0.1
+    res = rng.standard_normal((n, 2)) * np.sqrt(sig**2 + 0.05**2)[:, None]
+    res[wrong] = rng.uniform(-10, 10, (int(wrong.sum()), 2))
+    assert np.sqrt(unmodelled_variance(res, cov, area)) == pytest.approx(0.05, rel=0.1)  # 0.047
+    res = rng.standard_normal((n, 2)) * sig[:, None] * 0.9
+    res[wrong] = rng.uniform(-10, 10, (int(wrong.sum()), 2))
+    assert unmodelled_variance(res, cov, area) == 0.0
 
 
 def test_a_wrong_match_falls_outside_its_gate():
