@@ -62,7 +62,7 @@ from scipy.optimize import minimize_scalar
 from scipy.special import comb
 from scipy.stats import binom, chi2
 
-from mrslam_core.fusion.alignment import apply_transform, rigid_transform_2d, transform_jacobian
+from mrslam_core.fusion.alignment import MatchSplit, apply_transform, rigid_transform_2d, transform_jacobian
 from mrslam_core.fusion.config import FusionConfig
 from mrslam_core.fusion.maps import LandmarkMap
 from mrslam_core.geometry.se2 import wrap_angle
@@ -105,7 +105,7 @@ def with_marginals(slam: MultiRobotFastSLAM, lmap: LandmarkMap, rows: np.ndarray
 
 
 @dataclass(frozen=True)
-class GatedAlignment:
+class GatedAlignment(MatchSplit):
     """A map alignment judged by the χ² tests of this module.
 
     Attributes:
@@ -133,18 +133,6 @@ class GatedAlignment:
     reason: str = ""
     rmse: float = float("nan")
     unmodelled_sigma: float = 0.0
-
-    @property
-    def inlier_pairs(self) -> np.ndarray:
-        """(I, 2) (target row, source row) of the inliers."""
-        return self.matches[self.inliers]
-
-    @property
-    def outlier_pairs(self) -> np.ndarray:
-        """(P − I, 2) matches outside their gate."""
-        mask = np.ones(len(self.matches), bool)
-        mask[self.inliers] = False
-        return self.matches[mask]
 
 
 def residual_covariances(theta: np.ndarray, cov_t: np.ndarray, cov_s: np.ndarray) -> np.ndarray:
