@@ -41,17 +41,13 @@ from mrslam_core.types import ObservationSet, RobotSighting
 
 def _mrclam_fusion() -> FusionConfig:
     # 15 landmarks with unique barcodes: a descriptor match is the same landmark, so a match
-    # that is not an inlier is a badly mapped landmark of the robot's own map (dropped), and
-    # three inliers spread over a metre or more fix (tx, ty, θ). The robots joining at 35 s
-    # by map alignment are 0.3-0.5 m off with a particle spread of centimetres (their local
-    # particles agree on their pose relative to their own map), so the alignment's covariance
-    # (the larger of the residual and landmark-covariance forms at the robot) goes into the
-    # joined robot's FastSLAM 2.0 proposal and the moved landmarks' covariances
-    # (docs/fusion.md: unaligned max ratio 1.76 -> 1.59 on seeds 0-4).
-    return FusionConfig(
-        min_inliers=3, inlier_distance=0.5, max_residual=0.3, min_spread=1.0, source_outliers="drop",
-        transform_uncertainty="proposal", transform_cov_source="larger",
-    )
+    # that is not an inlier is a badly mapped landmark of the robot's own map (dropped). The
+    # joined robot's local particles agree on their pose relative to their own map far more than
+    # the alignment fixes it, so the alignment's covariance goes into the joined robot's
+    # FastSLAM 2.0 proposal and the moved landmarks' covariances (docs/fusion.md), not into
+    # per-particle transform draws; an alignment whose error the joined cloud cannot hold then
+    # waits for a sighting that agrees.
+    return FusionConfig(source_outliers="drop", transform_uncertainty="proposal")
 
 
 def pinned_filter() -> FilterConfig:
@@ -84,7 +80,7 @@ class MrclamFusionConfig:
             their dead reckoning rather than one random draw of its noise.
         rendezvous: also merge a robot once it and a robot of the central filter measure each
             other in the same step and a second such sighting within
-            ``fusion.rendezvous_window`` agrees (:class:`~mrslam_core.fusion.rendezvous.RendezvousGate`),
+            ``fusion.evidence_window`` agrees (:class:`~mrslam_core.fusion.rendezvous.RendezvousGate`),
             without waiting for the maps to overlap.
     """
 
@@ -142,7 +138,7 @@ def run_unknown_start(ds: MrclamDataset, cfg: MrclamFusionConfig, progress: bool
     merged: dict[str, dict] = {}
     attempts: dict[str, list[str]] = {name[i]: [] for i in local}
     every = max(round(cfg.try_every / mc.team_step), 1)
-    gate = RendezvousGate.from_config(cfg.fusion)
+    gate = RendezvousGate.from_config(cfg.fusion)  # one for sightings and alignments: they confirm each other
 
     def updates_for(i: int, k: int, group: list[int]) -> list[RobotUpdate]:
         m = per_step[i].get(k, np.zeros((0, 4)))
@@ -200,7 +196,7 @@ def run_unknown_start(ds: MrclamDataset, cfg: MrclamFusionConfig, progress: bool
         tic = time.perf_counter()
         ups = [u for i in in_central for u in updates_for(i, k, in_central)]
         if cfg.hold_gauge:
-            hold_gauge(central)
+            hold_gauge(central, [name[i] for i in known])
         central.step(ups)
         for i, slam in local.items():
             slam.step(updates_for(i, k, [i]))
@@ -210,8 +206,8 @@ def run_unknown_start(ds: MrclamDataset, cfg: MrclamFusionConfig, progress: bool
                 if meet is None:
                     continue
                 j, z_ij, z_ji = meet
-                rv = gate.offer(name[i], float(times[k] - t0), name[j],
-                                sighting_transform(central, local[i], name[j], z_ij, z_ji, rr_cov, rr_cov))
+                rv = gate.offer_sighting(name[i], float(times[k] - t0), name[j],
+                                         sighting_transform(central, local[i], name[j], z_ij, z_ji, rr_cov, rr_cov))
                 if rv is None:  # held until a second sighting agrees, or refused
                     attempts[name[i]].append(gate.log[name[i]][-1])
                     continue
@@ -219,7 +215,7 @@ def run_unknown_start(ds: MrclamDataset, cfg: MrclamFusionConfig, progress: bool
                 record(i, k, rv.transform, joined, f"rendezvous with {name[j]}", int(joined.fused), int(joined.fused), float("nan"))
         if k % every == 0:
             for i in list(local):
-                al, joined = try_join(central, local[i], cfg.fusion, name[i])
+                al, joined = try_join(central, local[i], cfg.fusion, name[i], gate, float(times[k] - t0))
                 if joined is None:
                     attempts[name[i]].append(f"{times[k] - t0:.1f} s: {al.reason}")
                     continue
@@ -317,6 +313,25 @@ def compare(ds: MrclamDataset, cfg: MrclamFusionConfig, progress: bool = False) 
             "step_ms_p50": float(np.median(unknown["update_ms"]))}
 
 
+class LaterStart:
+    """A dataset whose time span starts ``start`` [s] later (every robot's start pose, known or
+    not, is then its pose there): the same arena and robots in another situation."""
+
+    def __init__(self, ds: MrclamDataset, start: float) -> None:
+        self._ds, self._start = ds, float(start)
+
+    def __getattr__(self, name: str):
+        return getattr(self._ds, name)
+
+    def time_span(self) -> tuple[float, float]:
+        t0, t1 = self._ds.time_span()
+        return t0 + self._start, t1
+
+    def calibrated(self, calibration) -> LaterStart:
+        """The calibrated dataset, starting as late (both runs read the calibrated copy)."""
+        return LaterStart(self._ds.calibrated(calibration), self._start)
+
+
 def main(argv: list[str]) -> int:
     ap = argparse.ArgumentParser(prog="mrslam experiment fusion_mrclam", description=__doc__)
     ap.add_argument("folder", help="MR.CLAM dataset folder, e.g. ../shared/data/mrclam/dataset6")
@@ -337,11 +352,13 @@ def main(argv: list[str]) -> int:
                     help="join on one mutual sighting, without waiting for a second one that agrees")
     ap.add_argument("--rendezvous-anchor", action="store_true",
                     help="rendezvous joins anchored on each particle's own poses (FusionConfig.rendezvous_anchor)")
-    ap.add_argument("--pair-draw", choices=["grid", "product"],
-                    help="how a join draws its (central, local) ancestor pairs (FusionConfig.pair_draw)")
+    ap.add_argument("--known", type=int, nargs="+", help="robots whose start pose is known (default 1)")
+    ap.add_argument("--start", type=float, help="seconds of the log to skip (every robot starts there)")
     ap.add_argument("--out", default="runs/experiments")
     args = ap.parse_args(argv)
     ds = MrclamDataset(args.folder)
+    if args.start:
+        ds = LaterStart(ds, args.start)
     base = MrclamFusionConfig(rendezvous=not args.no_rendezvous, hold_gauge=not args.no_hold_gauge)
     if args.filter == "pinned":
         base = replace(base, mrclam=replace(base.mrclam, filter=pinned_filter()))
@@ -353,10 +370,10 @@ def main(argv: list[str]) -> int:
         base = replace(base, fusion=replace(base.fusion, transform_uncertainty=args.join_uncertainty))
     if args.rendezvous_anchor:
         base = replace(base, fusion=replace(base.fusion, rendezvous_anchor=True))
-    if args.pair_draw:
-        base = replace(base, fusion=replace(base.fusion, pair_draw=args.pair_draw))
+    if args.known:
+        base = replace(base, known=tuple(args.known))
     if args.single_sighting:
-        base = replace(base, fusion=replace(base.fusion, rendezvous_window=None))
+        base = replace(base, fusion=replace(base.fusion, evidence_window=None))
     mc = base.mrclam
     if args.particles:
         mc = replace(mc, filter=replace(mc.filter, num_particles=args.particles))

@@ -18,8 +18,28 @@ from mrslam_core.fusion.maps import FusionError, LandmarkMap
 from mrslam_core.geometry.se2 import wrap_angle
 
 
+class MatchSplit:
+    """The inlier / outlier split of an alignment's descriptor matches (``matches``: (P, 2)
+    (target row, source row); ``inliers``: indices into it)."""
+
+    matches: np.ndarray
+    inliers: np.ndarray
+
+    @property
+    def inlier_pairs(self) -> np.ndarray:
+        """(I, 2) (target row, source row) of the inliers."""
+        return self.matches[self.inliers]
+
+    @property
+    def outlier_pairs(self) -> np.ndarray:
+        """(P − I, 2) matches that are not inliers."""
+        mask = np.ones(len(self.matches), bool)
+        mask[self.inliers] = False
+        return self.matches[mask]
+
+
 @dataclass(frozen=True)
-class Alignment:
+class Alignment(MatchSplit):
     """The outcome of aligning a source map to a target map.
 
     Attributes:
@@ -42,18 +62,6 @@ class Alignment:
     accepted: bool
     reason: str = ""
     cov: np.ndarray = field(default_factory=lambda: np.full((3, 3), np.nan))
-
-    @property
-    def inlier_pairs(self) -> np.ndarray:
-        """(I, 2) (target row, source row) of the inliers."""
-        return self.matches[self.inliers]
-
-    @property
-    def outlier_pairs(self) -> np.ndarray:
-        """(P − I, 2) descriptor matches that are not inliers."""
-        mask = np.ones(len(self.matches), bool)
-        mask[self.inliers] = False
-        return self.matches[mask]
 
 
 def rigid_transform_2d(src: np.ndarray, dst: np.ndarray, weights: np.ndarray | None = None) -> np.ndarray:

@@ -10,6 +10,11 @@ from typing import Literal
 class FusionConfig:
     """Map alignment (004 section 3), multi-map consistency (3.1), fusion (4) and joining (5).
 
+    ``inlier_distance``, ``min_inliers``, ``max_residual`` and ``min_spread`` are the metre
+    thresholds of :func:`~mrslam_core.fusion.alignment.ransac_align` (re-localisation and map
+    checks of the central mapper, the multi-map solver); a join of a robot with an unknown start
+    is decided by the χ² tests of :mod:`~mrslam_core.fusion.acceptance` (``join_confidence``).
+
     Attributes:
         descriptor_threshold: E0, the largest squared Euclidean descriptor distance (000 eq. 16)
             of a putative match.
@@ -43,11 +48,6 @@ class FusionConfig:
         pair_likelihood_temper: exponent (0..1] applied to that likelihood, so that a few very
             confident landmarks cannot collapse the joined population onto one pair.
         z_variance: variance [m²] given to z when a planar (2D) map is padded to 3D.
-        residual_variance_scale: when joining, the source landmarks' x and y variances grow by
-            (scale × the alignment's inlier RMSE)² to hold the transform's own uncertainty
-            (0: trust the transform exactly, as 004 does).
-        transform_sampling_scale: when joining, each particle draws its own transform from
-            N(T, (scale)²·Cov(T)), Cov(T) from the inliers' residuals (0: every particle uses T).
         per_particle_alignment: when joining, refit the transform for each (central particle,
             local particle) pair on its own copies of the inlier landmarks (004 section 5 fuses
             particle by particle; one transform from the best maps fits only the best particle).
@@ -58,9 +58,10 @@ class FusionConfig:
             (MR.CLAM: up to 25° off at the join with a particle spread of 2°), so that the robot's
             next observations of the common map can pick the right pose. (0, 0, 0): the local
             pose as it is. On MR.CLAM it did not help (docs/fusion.md), so it is off there.
-        carry_landmarks: when joining, fuse the matched local landmarks into the common map and
-            add the local-only ones (004 section 4); False joins the robot's pose only and lets
-            it map again in the common filter (tried on MR.CLAM, not better; docs/fusion.md).
+        carry_landmarks: when joining, carry the local map over: a matched landmark keeps the
+            common copy (a particle that lacks it gets the moved local copy), the local-only ones
+            are added; False joins the robot's pose only and lets it map again in the common
+            filter (tried on MR.CLAM, not better; docs/fusion.md).
         transform_uncertainty: how the alignment's covariance Cov T enters the join. ``drift``:
             only added (propagated to the robot's pose) to the drift covariance the robot joins
             with. ``proposal``: also added to its pending motion covariance, so with deferred
@@ -69,39 +70,24 @@ class FusionConfig:
             corrected by the common map; and every local landmark moved into the common frame
             gets J_T·Cov T·J_Tᵀ on its x, y covariance (its position depends on T, so the fusion
             does not trust the moved copy over the common one more than T allows).
-        transform_cov_source: Cov T used by ``transform_uncertainty``: ``residuals`` (σ² from
-            the inliers' residuals, :func:`~mrslam_core.fusion.alignment.transform_covariance`),
-            ``landmarks`` (from the inlier landmarks' own covariances, Σ_target + R·Σ_source·Rᵀ
-            per pair, :func:`~mrslam_core.fusion.alignment.transform_information_covariance`), or
-            ``larger`` (whichever has the larger trace after propagation to the robot's pose).
-        max_join_pose_sigma: largest standard deviation [m] of the joined robot's position
-            that the alignment alone may cause (√tr of Cov T propagated to the robot's local
-            pose, Cov T from ``transform_cov_source``); an alignment above it is refused as
-            ill-conditioned (few inliers close together, far from the robot: a small rotation
-            error moves the robot a lot) and tried again later. None: no such check.
         min_pair_spread: in the per-pair refit, a (central, local) pair whose own copies of the
             matched landmarks lie within this RMS distance [m] of their centroid (or that holds
             fewer than two of them) uses the alignment's transform instead: two landmarks a
             few centimetres apart do not fix the rotation. None: ``min_spread``.
-        rendezvous_window: seconds within which a second mutual sighting must confirm the first
-            before a robot joins by rendezvous (:class:`~mrslam_core.fusion.rendezvous.RendezvousGate`);
-            None trusts a single sighting.
-        rendezvous_gate: probability of the χ²(3) quantile below which two sightings' transforms
-            agree (Mahalanobis distance with the sum of their covariances).
+        join_confidence: p of every χ² test that decides a join of a robot with an unknown
+            start (:mod:`~mrslam_core.fusion.acceptance`): a matched landmark pair is an inlier
+            within χ²₂(p) of its residual covariance, the inliers' residual sum within
+            χ²_{2n−3}(p), the chance of the inlier set under a wrong transform at most 1 − p,
+            two pieces of evidence agree within χ²₃(p) of their summed covariances, and the two
+            ranges of a mutual sighting within χ²₁(p).
+        evidence_window: seconds over which held evidence for a join (a mutual sighting, a weak
+            alignment) can confirm a new piece (:class:`~mrslam_core.fusion.acceptance.JoinGate`);
+            None trusts every piece that passes its own tests.
         rendezvous_anchor: a rendezvous join places the robot per joined particle relative to
             that particle's own pose of the seen robot, with the sighting's noise drawn per
             particle, and moves each local particle's map with its own pose
             (:func:`~mrslam_core.fusion.rendezvous.anchored_transforms`); False draws one
             transform per particle from N(T, Cov T) around the weighted means.
-        pair_draw: how a join draws its M (central, local) ancestor pairs from the M × L pairs
-            weighted w_c·w_l: ``grid`` — systematic resampling over the ravelled pair grid (004
-            section 5 read literally); its draws are 1/M apart in cumulative weight, so with
-            equal central weights every draw lands at the same offset inside its central
-            particle's block, i.e. on ONE local particle (MR.CLAM: robot 5 at 35 s joined with 1
-            of its 500 local particles) — or ``product``: each side by systematic resampling
-            from its own weights, the local draws paired in random order
-            (:func:`~mrslam_core.fusion.join.draw_pairs`; the product factorises, so this is
-            the same distribution with every local particle represented by its weight).
     """
 
     descriptor_threshold: float = 0.5
@@ -121,19 +107,14 @@ class FusionConfig:
     pair_likelihood: bool = False
     pair_likelihood_temper: float = 1.0
     z_variance: float = 1.0
-    residual_variance_scale: float = 0.0
-    transform_sampling_scale: float = 0.0
     per_particle_alignment: bool = True
     join_pose_sigma: tuple[float, float, float] = (0.0, 0.0, 0.0)
     carry_landmarks: bool = True
     transform_uncertainty: Literal["drift", "proposal"] = "drift"
-    transform_cov_source: Literal["residuals", "landmarks", "larger"] = "residuals"
-    max_join_pose_sigma: float | None = None
     min_pair_spread: float | None = None
-    rendezvous_window: float | None = 10.0
-    rendezvous_gate: float = 0.99
+    join_confidence: float = 0.99
+    evidence_window: float | None = 10.0
     rendezvous_anchor: bool = False
-    pair_draw: Literal["grid", "product"] = "grid"
 
     def __post_init__(self) -> None:
         if self.ransac_iterations < 1 or self.refine_iterations < 0:
@@ -150,17 +131,13 @@ class FusionConfig:
             raise ValueError("landmark_sigma must be > 0 or None")
         if not 0 < self.pair_likelihood_temper <= 1:
             raise ValueError("pair_likelihood_temper must be in (0, 1]")
-        if self.residual_variance_scale < 0 or self.transform_sampling_scale < 0:
-            raise ValueError("residual_variance_scale and transform_sampling_scale must be >= 0")
         if len(self.join_pose_sigma) != 3 or min(self.join_pose_sigma) < 0:
             raise ValueError("join_pose_sigma must be three values >= 0")
-        if self.max_join_pose_sigma is not None and self.max_join_pose_sigma <= 0:
-            raise ValueError("max_join_pose_sigma must be > 0 or None")
         if self.min_pair_spread is not None and self.min_pair_spread < 0:
             raise ValueError("min_pair_spread must be >= 0 or None")
-        if self.rendezvous_window is not None and self.rendezvous_window <= 0:
-            raise ValueError("rendezvous_window must be > 0 or None")
-        if not 0 < self.rendezvous_gate < 1:
-            raise ValueError("rendezvous_gate must be in (0, 1)")
+        if self.evidence_window is not None and self.evidence_window <= 0:
+            raise ValueError("evidence_window must be > 0 or None")
+        if not 0 < self.join_confidence < 1:
+            raise ValueError("join_confidence must be in (0, 1)")
         if self.z_variance <= 0:
             raise ValueError("z_variance must be > 0")

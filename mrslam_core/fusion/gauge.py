@@ -29,20 +29,26 @@ def map_is_empty(slam: MultiRobotFastSLAM) -> bool:
     return store.size == 0 or not bool(store.exists_dense().any())
 
 
-def hold_gauge(slam: MultiRobotFastSLAM) -> bool:
-    """Collapse every robot's pose spread onto its weighted mean while the map is empty.
+def hold_gauge(slam: MultiRobotFastSLAM, robots: list[str] | None = None) -> bool:
+    """Collapse the pose spread of ``robots`` onto its weighted mean while the map is empty.
 
     Args:
         slam: the central filter; modified in place (poses (M, K, 3), ``pending_cov``).
+        robots: the robots whose start poses fix the frame (default: all). A robot joined by a
+            rendezvous before the first landmark keeps its particles: their spread is the
+            join's uncertainty relative to those robots, not the frame's.
 
     Returns:
         True if the poses were collapsed (the map was empty), False if nothing was changed.
     """
     if not map_is_empty(slam):
         return False
+    ks = np.arange(len(slam.robots)) if robots is None else np.array([slam.index[r] for r in robots], np.int64)
     w = np.exp(slam.log_w)
-    xy = np.einsum("m,mkd->kd", w, slam.poses[..., :2])
-    th = np.arctan2(w @ np.sin(slam.poses[..., 2]), w @ np.cos(slam.poses[..., 2]))
-    slam.poses[...] = np.concatenate([xy, th[:, None]], axis=1)[None]
-    slam.pending_cov.clear()
+    p = slam.poses[:, ks]
+    xy = np.einsum("m,mkd->kd", w, p[..., :2])
+    th = np.arctan2(w @ np.sin(p[..., 2]), w @ np.cos(p[..., 2]))
+    slam.poses[:, ks] = np.concatenate([xy, th[:, None]], axis=1)[None]
+    for k in ks.tolist():
+        slam.pending_cov.pop(k, None)
     return True

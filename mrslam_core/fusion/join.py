@@ -27,15 +27,18 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from mrslam_core.fusion.alignment import (
-    Alignment,
-    ransac_align,
-    rigid_transform_2d,
-    transform_information_covariance,
-    transform_jacobian,
+from mrslam_core.fusion.acceptance import (
+    Evidence,
+    GatedAlignment,
+    JoinGate,
+    absorbable,
+    chi2_align,
+    pose_jacobian_transform,
+    reference_spread,
+    with_marginals,
 )
+from mrslam_core.fusion.alignment import match_descriptors, rigid_transform_2d, transform_jacobian
 from mrslam_core.fusion.config import FusionConfig
-from mrslam_core.fusion.kalman import kalman_fuse
 from mrslam_core.fusion.maps import FusionError, LandmarkMap
 from mrslam_core.geometry.se2 import compose
 from mrslam_core.linalg import quad_form, sym_inv_det
@@ -146,25 +149,6 @@ def systematic_draw(log_w: np.ndarray, n: int, rng: np.random.Generator) -> np.n
     return np.searchsorted(cdf, u, side="right").clip(0, log_w.size - 1)
 
 
-def draw_pairs(log_w_c: np.ndarray, log_w_l: np.ndarray, n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-    """``n`` (central, local) ancestor pairs from the product weights w_c·w_l: each side drawn
-    by systematic resampling from its own weights, the local draws paired in random order.
-
-    The product factorises, so this draws from it with the marginals of low-variance
-    resampling. (Systematic resampling over the ravelled M × L pair grid instead, as 004's
-    "B × B pairs resampled to B" reads literally, spaces the n draws 1/n apart in cumulative
-    weight: with equal central weights every draw falls at the same offset inside its central
-    particle's block, i.e. on ONE local particle — on MR.CLAM robot 5 joined at 35 s with 1
-    of its 500 local particles.)
-
-    Returns:
-        ((n,) central indices, sorted; (n,) local indices).
-    """
-    anc_c = systematic_draw(normalise_log_weights(np.asarray(log_w_c, float)), n, rng)
-    anc_l = systematic_draw(normalise_log_weights(np.asarray(log_w_l, float)), n, rng)
-    return anc_c, anc_l[rng.permutation(n)]
-
-
 def join_filters(
     central: MultiRobotFastSLAM,
     local: MultiRobotFastSLAM,
@@ -227,14 +211,11 @@ def join_filters(
     m = central.num_particles
     cs, ls = pairs[:, 0], pairs[:, 1]
 
-    if config.pair_draw == "product":
-        anc_c, anc_l = draw_pairs(central.log_w, local.log_w, m, central.rng)
-    else:
-        n_l = local.num_particles
-        log_pair = central.log_w[:, None] + local.log_w[None, :]
-        draw = systematic_draw(normalise_log_weights(log_pair.ravel()), m, central.rng)
-        anc_c, anc_l = draw // n_l, draw % n_l
-
+    # every central particle stays as it is (poses, map, weight): the join only adds the newcomer;
+    # each is paired with a local particle drawn by its weight, so the pairs sample w_c·w_l
+    anc_c = np.arange(m)
+    anc_l = systematic_draw(normalise_log_weights(np.asarray(local.log_w, float)), m, central.rng)
+    anc_l = anc_l[central.rng.permutation(m)]
     # per particle transform: refitted on the pair's own copies of the matched landmarks
     # (each central particle's map may sit slightly differently), or one for all
     t_all = np.broadcast_to(t, (m, 3)).copy()
@@ -268,8 +249,8 @@ def join_filters(
         ll = -0.5 * (quad_form(mc - ml, inv) + np.log(det) + dim * LOG_2PI)
         pair_ll = config.pair_likelihood_temper * np.where(ec & el, ll, 0.0).sum(1)
     # particles: central ancestors, then the robot's pose moved into the common frame
-    central.select_particles(anc_c, central.score[anc_c] + local.score[anc_l])
-    central.log_w = normalise_log_weights(pair_ll)
+    central.score = central.score + local.score[anc_l]
+    central.log_w = normalise_log_weights(central.log_w + pair_ll)
     stamp = local.last_stamp.get(local.robots[kl])
     sampled = pair_transforms is not None or (transform_cov is not None and np.isfinite(transform_cov).all())
     to_proposal = config.transform_uncertainty == "proposal" and not sampled and pose_cov is not None
@@ -283,31 +264,20 @@ def join_filters(
         drift = spread if drift is None else drift + spread
     central.add_robot(name, joined, stamp, drift, pending)
 
-    rows = np.arange(m)[:, None]
     slot_map = np.full(ls_store.size, -1, np.int64)
     if len(pairs) and config.carry_landmarks:
-        mc, sc, ec, nc, scc = cs_store.gather(rows, cs[None], ("mean", "cov", "exists", "count", "score"))
+        # a matched landmark keeps the common map's copy: the local copy's position in the common
+        # frame came through T, which was fitted to the common copies, so fusing it would count
+        # that twice and let the newcomer's map move the common one (and the robots on it); only a
+        # particle that lacks the landmark gets the local copy, moved
+        ec, = cs_store.gather(anc_c[:, None], cs[None], ("exists",))
         ml, sl, el, nl, scl = ls_store.gather(anc_l[:, None], ls[None], ("mean", "cov", "exists", "count", "score"))
         ml, sl = move_landmarks(t_all, ml.astype(float), sl.astype(float), extra_variance, lm_cov)
-        mc, sc = mc.astype(float), sc.astype(float)
-        both = ec & el
-        mean, cov = mc.copy(), sc.copy()
-        if both.any():
-            mean[both], cov[both] = kalman_fuse(mc[both], sc[both], ml[both], sl[both])
-        only_l = el & ~ec
-        mean[only_l], cov[only_l] = ml[only_l], sl[only_l]
-        count = np.where(both, nc + nl, np.where(only_l, nl, nc))
-        score = np.minimum(np.maximum(scc, scl), central.config.existence.max_score)
-        wi, wp = np.nonzero(el)
+        wi, wp = np.nonzero(el & ~ec)
         if wi.size:
-            cs_store.write(wi, cs[wp], mean=mean[wi, wp], cov=cov[wi, wp], exists=True,
-                           count=count[wi, wp], score=score[wi, wp])
-        n1 = np.where(ec, nc, 0).sum(0).astype(float)[:, None]
-        n2 = np.where(el, nl, 0).sum(0).astype(float)[:, None]
-        if cs_store.descriptor_dim and cs_store.descriptor_dim == ls_store.descriptor_dim:
-            d = (n1 * cs_store.descriptor[cs] + n2 * ls_store.descriptor[ls]) / np.maximum(n1 + n2, 1e-12)
-            cs_store.descriptor[cs] = np.where(n1 + n2 > 0, d, cs_store.descriptor[cs])
-        cs_store.refresh_reference(cs)
+            cs_store.write(wi, cs[wp], mean=ml[wi, wp], cov=sl[wi, wp], exists=True, count=nl[wi, wp],
+                           score=np.minimum(scl[wi, wp], central.config.existence.max_score))
+            cs_store.refresh_reference(np.unique(cs[wp]))
         slot_map[ls] = cs
 
     held = ls_store.exists_dense()[anc_l]  # (M, S_local)
@@ -333,55 +303,79 @@ def join_filters(
                       np.column_stack([anc_c, anc_l]), slot_map, t_all)
 
 
-def alignment_covariance(al: Alignment, target: LandmarkMap, source: LandmarkMap, config: FusionConfig,
-                         local: MultiRobotFastSLAM, k: int = 0) -> np.ndarray:
-    """Cov T (3, 3) of an alignment as ``config.transform_cov_source`` says: from the inliers'
-    residuals (``al.cov``), from the inlier landmarks' own covariances
-    (:func:`transform_information_covariance`), or the ``larger`` of the two at the pose of
-    robot k of ``local`` (trace of the propagated x, y block)."""
-    if config.transform_cov_source == "residuals":
-        return al.cov
-    inl = al.inlier_pairs
-    from_lm = transform_information_covariance(
-        al.transform, source.means[inl[:, 1]], source.covs[inl[:, 1]], target.covs[inl[:, 0]])
-    if config.transform_cov_source == "landmarks" or not np.isfinite(al.cov).all():
-        return from_lm
-    at_pose = [np.trace(pose_transform_cov(local, k, al.transform, c)[:2, :2]) for c in (al.cov, from_lm)]
-    return al.cov if at_pose[0] >= at_pose[1] else from_lm
-
-
-def try_join(
+def assess_alignment(
     central: MultiRobotFastSLAM, local: MultiRobotFastSLAM, config: FusionConfig, robot: str | None = None
-) -> tuple[Alignment, JoinResult | None]:
-    """Align the local filter's best map to the central filter's best map and, if the alignment
-    is accepted, join the local filter into the central one.
+) -> tuple[GatedAlignment, Evidence | None, LandmarkMap, LandmarkMap]:
+    """Align the local filter's map to the central one and judge it (:mod:`~mrslam_core.fusion.acceptance`).
 
-    With ``config.max_join_pose_sigma``, an alignment whose covariance (``transform_cov_source``)
-    puts more than that standard deviation on the robot's position is refused as ill-conditioned
-    (``reason`` says so) and nothing is joined.
+    Descriptor matches between the two best maps; each matched landmark at its marginal over its
+    filter's particles; :func:`~mrslam_core.fusion.acceptance.chi2_align`; then the transform's
+    covariance propagated to the robot's local pose against the spread the joined cloud carries
+    (:func:`~mrslam_core.fusion.acceptance.reference_spread`).
 
     Returns:
-        (the alignment — its ``reason`` says why nothing was joined —, the join or None).
+        (the alignment, the evidence it gives — None when inconsistent; ``strong`` when
+        absorbable —, the target and source maps with marginals).
     """
     target = LandmarkMap.from_filter(central, z_variance=config.z_variance)
     source = LandmarkMap.from_filter(local, z_variance=config.z_variance)
-    al = ransac_align(target, source, config)
-    if not al.accepted:
-        return al, None
+    matches = match_descriptors(target.descriptors, source.descriptors, config.descriptor_threshold, config.mutual)
+    target = with_marginals(central, target, matches[:, 0])
+    source = with_marginals(local, source, matches[:, 1])
+    al = chi2_align(target, source, config, matches)
+    if not al.consistent:
+        return al, None, target, source
     kl = local.index.get(robot, 0) if robot else 0
-    t_cov = alignment_covariance(al, target, source, config, local, kl)
-    if config.max_join_pose_sigma is not None:
-        sd = float(np.sqrt(np.trace(pose_transform_cov(local, kl, al.transform, t_cov)[:2, :2])))
-        if not sd <= config.max_join_pose_sigma:
-            return replace(al, accepted=False, reason=(
-                f"alignment ill-conditioned: {al.inliers.size} inliers within {al.spread:.2f} m put "
-                f"{sd:.3f} m on the robot's position (allowed {config.max_join_pose_sigma:.3f} m)")), None
+    x_local = local.estimate().mean[kl]
+    jt = pose_jacobian_transform(al.transform, x_local)
+    p_t = jt @ al.cov @ jt.T
+    load = absorbable(p_t, reference_spread(central, local, kl, al.transform))
+    strong = load <= 3.0
+    reason = "" if strong else (
+        f"{al.inliers.size} inliers: the transform's error at the robot is {load:.1f} times the spread "
+        f"the joined cloud carries (tr P_ref⁻¹P_T > 3): weak evidence")
+    al = replace(al, reason=reason)
+    return al, Evidence(al.transform, al.cov, f"alignment ({al.inliers.size} inliers)", strong, "alignment"), target, source
+
+
+def join_alignment(
+    central: MultiRobotFastSLAM, local: MultiRobotFastSLAM, al: GatedAlignment, target: LandmarkMap,
+    source: LandmarkMap, config: FusionConfig, robot: str | None = None,
+) -> JoinResult:
+    """Join ``local`` into ``central`` with an alignment from :func:`assess_alignment`: its
+    inlier landmarks matched, its other matches per ``config.source_outliers``, Cov T per
+    ``config.transform_uncertainty`` (every joined particle uses T, refitted per pair with
+    ``config.per_particle_alignment``)."""
     inl = al.inlier_pairs
     pairs = np.column_stack([target.ids[inl[:, 0]], source.ids[inl[:, 1]]])
     drop = source.ids[al.outlier_pairs[:, 1]] if config.source_outliers == "drop" else None
-    extra = (config.residual_variance_scale * al.rmse) ** 2
-    sampled = t_cov * config.transform_sampling_scale**2 if config.transform_sampling_scale > 0 else None
-    return al, join_filters(
-        central, local, al.transform, pairs, config, robot, drop, extra, sampled, config.per_particle_alignment,
-        pose_cov=t_cov,
-    )
+    return join_filters(central, local, al.transform, pairs, config, robot, drop, 0.0, None,
+                        config.per_particle_alignment, pose_cov=al.cov)
+
+
+def try_join(
+    central: MultiRobotFastSLAM, local: MultiRobotFastSLAM, config: FusionConfig, robot: str | None = None,
+    gate: JoinGate | None = None, time_s: float = 0.0,
+) -> tuple[GatedAlignment, JoinResult | None]:
+    """Align the local filter's map to the central one and join it if the evidence suffices.
+
+    With ``gate`` (one per team, shared with rendezvous sightings) the alignment is offered to it
+    at ``time_s`` [s]: a strong one (consistent and absorbable) joins unless held evidence
+    contradicts it, a weak one (consistent, not absorbable) is held until a sighting agrees.
+    Without ``gate`` the pipeline has no second, independent source of evidence (the stereo
+    central mapper: no sightings), so holding a weak alignment could never end in its
+    confirmation — later alignments of the same two maps are not independent of it — while the
+    local map drifts on: every consistent alignment joins, and a weak one says so in ``reason``.
+
+    Returns:
+        (the alignment — its ``reason`` says why nothing was joined, or that a weak one was —,
+        the join or None).
+    """
+    name = robot or local.robots[0]
+    al, ev, target, source = assess_alignment(central, local, config, robot)
+    if ev is None:
+        return al, None
+    if gate is not None and gate.offer(name, time_s, ev) is None:
+        return replace(al, reason=gate.log[name][-1]), None
+    reason = "" if ev.strong or gate is not None else f"joined without independent evidence: {al.reason}"
+    return replace(al, reason=reason), join_alignment(central, local, al, target, source, config, robot)

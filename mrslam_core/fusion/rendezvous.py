@@ -11,15 +11,17 @@ transform is T = x_i,map ⊕ x_i,local⁻¹. The robot is then joined particle b
 alignment (:func:`mrslam_core.fusion.join.join_filters`), each joined particle drawing its own
 transform from N(T, Cov T) (Cov T from the sightings' noise and j's pose covariance), so the joint
 filter's next sightings and landmark observations weigh them. Local landmarks whose barcode /
-descriptor matches a common landmark within ``inlier_distance`` after T are fused, the other
-matched ones are dropped (``source_outliers = drop``) or kept, the rest added, as for a map join.
+descriptor matches a common landmark and agree with it after T within the χ²₂ gate of both
+covariances and Cov T are matched (the common copy kept), the other matched ones are dropped
+(``source_outliers = drop``) or kept, the rest added, as for a map join.
 
-One mutual sighting is not trusted on its own (``FusionConfig.rendezvous_window``): a misread
-barcode or a wrong range would merge the robot wrongly. :class:`RendezvousGate` holds each
-sighting's transform and lets the robot join only when a second mutual sighting within the window
-gives a transform that agrees with an earlier one, (T₂ − T₁)ᵀ(Cov T₁ + Cov T₂)⁻¹(T₂ − T₁) below the
-χ²(3) quantile ``rendezvous_gate``; a disagreeing pair is logged with its distance. A sighting whose
-two ranges (i's of j, j's of i) disagree beyond the χ²(1) quantile is refused outright.
+One mutual sighting is weak evidence (:class:`RendezvousGate`, a
+:class:`~mrslam_core.fusion.acceptance.JoinGate`): a misread barcode or a wrong range would merge
+the robot wrongly. It is held, and the robot joins when a later piece of evidence within
+``FusionConfig.evidence_window`` — a second mutual sighting or a map alignment — agrees,
+(T₂ − T₁)ᵀ(Cov T₁ + Cov T₂)⁻¹(T₂ − T₁) below the χ²(3) quantile ``join_confidence``; a disagreeing
+pair is logged with its distance. A sighting whose two ranges (i's of j, j's of i) disagree beyond
+the χ²(1) quantile is refused outright.
 """
 
 from __future__ import annotations
@@ -29,7 +31,8 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from scipy.stats import chi2
 
-from mrslam_core.fusion.alignment import explained, match_descriptors
+from mrslam_core.fusion.acceptance import Evidence, JoinGate, with_marginals
+from mrslam_core.fusion.alignment import match_descriptors, transform_jacobian
 from mrslam_core.fusion.config import FusionConfig
 from mrslam_core.fusion.join import JoinResult, join_filters
 from mrslam_core.fusion.maps import LandmarkMap
@@ -167,64 +170,53 @@ def transform_distance(a: Rendezvous, b: Rendezvous) -> float:
 
 
 @dataclass
-class RendezvousGate:
-    """Mutual sightings of robots not merged yet, held until two of them agree.
+class RendezvousGate(JoinGate):
+    """A :class:`~mrslam_core.fusion.acceptance.JoinGate` that also takes mutual sightings: a
+    sighting is weak evidence (held until another piece agrees), refused outright when its two
+    ranges (i's of j, j's of i) disagree beyond ``range_threshold`` (χ²₁ quantile: the relative
+    pose averages them, which halves one wrong range).
 
     Attributes:
-        window: seconds over which an earlier sighting can confirm a later one (None: every
-            sighting is trusted alone).
-        threshold: largest :func:`transform_distance` of two agreeing sightings (χ²(3) quantile).
-        range_threshold: largest ``range_nis`` of one sighting (χ²(1) quantile of the same
-            probability): the two robots' ranges of each other must agree before the sighting
-            is held at all (the relative pose averages them, which halves one wrong range).
-        held: robot -> [(time [s], seen robot, Rendezvous)] within the window.
-        log: robot -> reasons a sighting did not confirm (for the log).
+        range_threshold: largest ``range_nis`` of one sighting.
     """
 
-    window: float | None
-    threshold: float
     range_threshold: float = float("inf")
-    held: dict[str, list[tuple[float, str, Rendezvous]]] = field(default_factory=dict)
-    log: dict[str, list[str]] = field(default_factory=dict)
 
     @classmethod
     def from_config(cls, config: FusionConfig) -> RendezvousGate:
-        p = config.rendezvous_gate
-        return cls(config.rendezvous_window, float(chi2.ppf(p, 3)), float(chi2.ppf(p, 1)))
+        p = config.join_confidence
+        return cls(config.evidence_window, float(chi2.ppf(p, 3)), range_threshold=float(chi2.ppf(p, 1)))
 
-    def offer(self, robot: str, time_s: float, seen: str, rv: Rendezvous) -> Rendezvous | None:
-        """A new mutual sighting of ``robot`` (time [s], the robot seen, its rendezvous).
+    def offer_sighting(self, robot: str, time_s: float, seen: str, rv: Rendezvous) -> Rendezvous | None:
+        """A new mutual sighting of ``robot`` with ``seen`` at ``time_s`` [s].
 
         Returns:
-            ``rv`` when it is confirmed (an earlier held sighting within the window agrees, or
-            no window is set), else None (``rv`` held, the reason appended to ``log``). The
-            confirmed sighting is used as it is, not averaged with the earlier one: two
-            sightings a fraction of a second apart in the same geometry do not have independent
-            errors (on MR.CLAM dataset 6 the two readings of robots 1 and 3 at 17.6 s and
-            17.8 s give the same ranges), so averaging would claim a precision they lack.
+            ``rv`` when held evidence (an earlier sighting, an alignment) agrees with it or no
+            window is set; else None (held, or refused; the reason appended to ``log``). The
+            sighting is used as it is, not averaged with the piece that confirmed it.
         """
-        if self.window is None:
-            return rv
-        if not rv.range_nis <= self.range_threshold:
+        if self.window is not None and not rv.range_nis <= self.range_threshold:
             self.log.setdefault(robot, []).append(
                 f"{time_s:.1f} s: sighting with {seen}: the two ranges disagree (normalised "
                 f"{rv.range_nis:.1f} > {self.range_threshold:.1f}): not merged")
             return None
-        held = [h for h in self.held.get(robot, []) if time_s - h[0] <= self.window]
-        dist = [transform_distance(h[2], rv) for h in held]
-        if dist and min(dist) <= self.threshold:
-            self.held.pop(robot, None)
-            return rv
-        if dist:
-            h = held[int(np.argmin(dist))]
-            self.log.setdefault(robot, []).append(
-                f"{time_s:.1f} s: sighting with {seen} disagrees with the one with {h[1]} at {h[0]:.1f} s "
-                f"(distance² {min(dist):.1f} > {self.threshold:.1f}): not merged")
-        else:
-            self.log.setdefault(robot, []).append(
-                f"{time_s:.1f} s: sighting with {seen} held until a second one within {self.window:.0f} s agrees")
-        self.held[robot] = [*held, (time_s, seen, rv)]
-        return None
+        ev = Evidence(rv.transform, rv.transform_cov, f"sighting with {seen}", False, "sighting")
+        return rv if self.offer(robot, time_s, ev) is not None else None
+
+
+def rendezvous_inliers(rv: Rendezvous, target: LandmarkMap, source: LandmarkMap, matches: np.ndarray,
+                       config: FusionConfig) -> np.ndarray:
+    """(P,) bool: the descriptor ``matches`` (target row, source row) whose local landmark, moved
+    by the rendezvous transform, lies within χ²₂(``join_confidence``) of its common-map copy, with
+    both landmarks' covariances and the transform's (J_T·Cov T·J_Tᵀ at the landmark)."""
+    src = source.means[matches[:, 1], :2]
+    jac = transform_jacobian(rv.transform, src)
+    floor = jac @ rv.transform_cov @ np.swapaxes(jac, -1, -2)  # (P, 2, 2)
+    c, s = np.cos(rv.transform[2]), np.sin(rv.transform[2])
+    rot = np.array([[c, -s], [s, c]])
+    res = (src @ rot.T + rv.transform[:2]) - target.means[matches[:, 0], :2]
+    cov = target.covs[matches[:, 0], :2, :2] + rot @ source.covs[matches[:, 1], :2, :2] @ rot.T + floor
+    return np.einsum("ni,ni->n", res, np.linalg.solve(cov, res[..., None])[..., 0]) <= chi2.ppf(config.join_confidence, 2)
 
 
 def join_rendezvous(
@@ -232,8 +224,8 @@ def join_rendezvous(
 ) -> JoinResult:
     """Join ``local`` (robot ``robot``) into ``central`` with the rendezvous transform ``rv``.
 
-    Landmarks: descriptor matches between the two best maps whose positions agree within
-    ``config.inlier_distance`` after the rendezvous transform are fused; other matches follow
+    Landmarks: descriptor matches between the two best maps that agree after the rendezvous
+    transform (:func:`rendezvous_inliers`) are matched (the common copy kept); other matches follow
     ``config.source_outliers``. With ``config.rendezvous_anchor`` (and ``rv.seen`` a robot of
     ``central``) each joined particle's transform is anchored on its own ancestors' poses
     (:func:`anchored_transforms`); otherwise drawn from N(T, Cov T).
@@ -245,7 +237,9 @@ def join_rendezvous(
     if len(target.means) and len(source.means):
         matches = match_descriptors(target.descriptors, source.descriptors, config.descriptor_threshold, config.mutual)
         if len(matches):
-            ok = explained(rv.transform, target, source, matches, config.inlier_distance)
+            target = with_marginals(central, target, matches[:, 0])
+            source = with_marginals(local, source, matches[:, 1])
+            ok = rendezvous_inliers(rv, target, source, matches, config)
             pairs = np.column_stack([target.ids[matches[ok, 0]], source.ids[matches[ok, 1]]])
             if config.source_outliers == "drop":
                 drop = source.ids[matches[~ok, 1]]

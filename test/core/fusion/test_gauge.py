@@ -42,3 +42,15 @@ def test_a_map_with_landmarks_is_left_alone():
     assert not map_is_empty(slam) and not hold_gauge(slam)
     np.testing.assert_array_equal(slam.poses, before)
     assert 0 in slam.pending_cov
+
+
+def test_only_the_frame_robots_are_held():
+    """A robot joined before the first landmark keeps its particles (its spread is its join's
+    uncertainty); the robots that fix the frame collapse as before."""
+    slam = spread_filter(2)
+    slam.pending_cov[1] = np.eye(3) * 0.02
+    before = slam.poses.copy()
+    assert hold_gauge(slam, ["a"])
+    np.testing.assert_array_equal(slam.poses[:, 1], before[:, 1])
+    assert np.ptp(slam.poses[:, 0], axis=0).max() == 0.0
+    assert list(slam.pending_cov) == [1]

@@ -103,14 +103,14 @@ def _sighting(central, local, z_ij, z_ji, rng):
 def test_a_single_mutual_sighting_is_held_and_a_consistent_second_one_merges():
     t_true, x_i, x_j, _, central, local = _gate_world()
     rng = np.random.default_rng(5)
-    cfg = FusionConfig(inlier_distance=0.5, source_outliers="drop", rendezvous_window=10.0)
+    cfg = FusionConfig(inlier_distance=0.5, source_outliers="drop", evidence_window=10.0)
     gate = RendezvousGate.from_config(cfg)
     z_ij, z_ji = range_bearing(x_i, x_j), range_bearing(x_j, x_i)
     first = _sighting(central, local, z_ij, z_ji, rng)
-    assert gate.offer("b", 20.0, "a", first) is None and "held" in gate.log["b"][-1]
+    assert gate.offer_sighting("b", 20.0, "a", first) is None and "held" in gate.log["b"][-1]
     second = _sighting(central, local, z_ij, z_ji, rng)
     assert transform_distance(first, second) < gate.threshold
-    ok = gate.offer("b", 20.4, "a", second)
+    ok = gate.offer_sighting("b", 20.4, "a", second)
     assert ok is second and "b" not in gate.held
     res = join_rendezvous(central, local, "b", ok, cfg)
     assert central.robots == ["a", "b"] and res.robot == "b"
@@ -125,40 +125,40 @@ def test_a_corrupted_sighting_does_not_merge_and_says_why():
     a later correct sighting confirms the first."""
     _, x_i, x_j, x_k, central, local = _gate_world()
     rng = np.random.default_rng(6)
-    gate = RendezvousGate.from_config(FusionConfig(rendezvous_window=10.0, rendezvous_gate=0.99))
+    gate = RendezvousGate.from_config(FusionConfig(evidence_window=10.0, join_confidence=0.99))
     assert gate.threshold == np.float64(chi2.ppf(0.99, 3))
     z_ij, z_ji = range_bearing(x_i, x_j), range_bearing(x_j, x_i)
     good = _sighting(central, local, z_ij, z_ji, rng)
     misread = _sighting(central, local, range_bearing(x_i, x_k), z_ji, rng)
     too_far = _sighting(central, local, z_ij + np.array([1.5, 0.0]), z_ji, rng)
-    assert gate.offer("b", 30.0, "a", good) is None
+    assert gate.offer_sighting("b", 30.0, "a", good) is None
     assert transform_distance(good, misread) > gate.threshold
-    assert gate.offer("b", 30.2, "a", misread) is None
-    assert "disagrees with the one with a at 30.0 s" in gate.log["b"][-1] and "not merged" in gate.log["b"][-1]
+    assert gate.offer_sighting("b", 30.2, "a", misread) is None
+    assert "sighting with a disagrees with held evidence" in gate.log["b"][-1] and "not joined" in gate.log["b"][-1]
     assert too_far.range_nis > gate.range_threshold > good.range_nis
-    assert gate.offer("b", 30.4, "a", too_far) is None
+    assert gate.offer_sighting("b", 30.4, "a", too_far) is None
     assert "ranges disagree" in gate.log["b"][-1]
     assert [h[0] for h in gate.held["b"]] == [30.0, 30.2]  # the refused one is not even held
     assert len(central.robots) == 1  # nothing merged
     again = _sighting(central, local, z_ij, z_ji, rng)
-    assert gate.offer("b", 31.0, "a", again) is again
+    assert gate.offer_sighting("b", 31.0, "a", again) is again
 
 
 def test_a_corrupted_first_sighting_is_outvoted_and_old_sightings_expire():
     _, x_i, x_j, x_k, central, local = _gate_world()
     rng = np.random.default_rng(7)
-    gate = RendezvousGate.from_config(FusionConfig(rendezvous_window=5.0))
+    gate = RendezvousGate.from_config(FusionConfig(evidence_window=5.0))
     z_ij, z_ji = range_bearing(x_i, x_j), range_bearing(x_j, x_i)
-    assert gate.offer("b", 10.0, "a", _sighting(central, local, range_bearing(x_i, x_k), z_ji, rng)) is None
-    assert gate.offer("b", 10.2, "a", _sighting(central, local, z_ij, z_ji, rng)) is None
+    assert gate.offer_sighting("b", 10.0, "a", _sighting(central, local, range_bearing(x_i, x_k), z_ji, rng)) is None
+    assert gate.offer_sighting("b", 10.2, "a", _sighting(central, local, z_ij, z_ji, rng)) is None
     late = _sighting(central, local, z_ij, z_ji, rng)
-    assert gate.offer("b", 16.0, "a", late) is None  # the correct one at 10.2 s is 5.8 s old
+    assert gate.offer_sighting("b", 16.0, "a", late) is None  # the correct one at 10.2 s is 5.8 s old
     assert "held" in gate.log["b"][-1]
     confirm = _sighting(central, local, z_ij, z_ji, rng)
-    assert gate.offer("b", 16.2, "a", confirm) is confirm
+    assert gate.offer_sighting("b", 16.2, "a", confirm) is confirm
     # no window: one sighting is trusted as it is
-    single = RendezvousGate.from_config(FusionConfig(rendezvous_window=None))
-    assert single.offer("b", 1.0, "a", confirm) is confirm
+    single = RendezvousGate.from_config(FusionConfig(evidence_window=None))
+    assert single.offer_sighting("b", 1.0, "a", confirm) is confirm
 
 
 def test_anchored_transforms_put_every_particle_at_its_own_sighting_pose():
@@ -220,7 +220,7 @@ def test_an_anchored_rendezvous_join_keeps_the_local_uncertainty_in_the_map_not_
         eye = np.eye(3, dtype=np.float32)
         local.insert_landmarks(np.broadcast_to(lm_l, (400, 1, 3)).copy(),
                                np.broadcast_to(np.eye(3) * 0.01, (400, 1, 3, 3)).copy(), np.ones((400, 1), bool), eye[2:3])
-        cfg = FusionConfig(rendezvous_anchor=anchor, transform_uncertainty="proposal", pair_draw="product")
+        cfg = FusionConfig(rendezvous_anchor=anchor, transform_uncertainty="proposal")
         rv, res = join_by_rendezvous(central, local, "b", "a", range_bearing(x_i, x_j), range_bearing(x_j, x_i), COV, COV, cfg)
         p = central.poses[:, 1]
         spreads[anchor] = np.std(wrap_angle(p[:, 2] - x_i[2]))
