@@ -51,11 +51,12 @@ def _mrclam_fusion() -> FusionConfig:
 
 
 def pinned_filter() -> FilterConfig:
-    """The MR.CLAM filter of docs/results.md's issue-2 table (heading / position random walks
-    0.05 rad/√s and 0.005 m/√s, motion noise sampled every step, no re-localisation), which this
-    experiment used before robots could join by rendezvous (``--filter pinned``). With map
-    alignment only, the later defaults (deferred motion noise, re-localisation) did worse; with
-    rendezvous joins they do better (docs/fusion.md)."""
+    """The earlier MR.CLAM filter (heading / position random walks 0.05 rad/√s and 0.005 m/√s,
+    motion noise sampled every step, no re-localisation; ``--filter pinned``), which this
+    experiment used before robots could join by rendezvous. The current defaults (deferred motion
+    noise, re-localisation) are the ones of docs/results.md, "Multi-robot FastSLAM on real data:
+    UTIAS MR.CLAM dataset 6". With map alignment only the current defaults did worse; with
+    rendezvous joins they do better (docs/fusion.md, "Measured, not adopted")."""
     base = MrclamConfig().filter
     return replace(
         base,
