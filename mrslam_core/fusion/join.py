@@ -2,22 +2,25 @@
 
 A robot whose start pose is unknown runs a local :class:`MultiRobotFastSLAM` with K = 1 from its own
 origin. Once its map aligns with the central map (transform T, local frame → common frame, and the
-inlier landmark pairs), the two filters are joined particle by particle: every particle i of the
-central filter is paired with every particle j of the local filter (M × L pairs, weighted w_i·w_j),
-M pairs are drawn by systematic resampling, and each drawn pair becomes one particle of the joint
-filter:
+inlier landmark pairs) and the alignment is accepted (:mod:`~mrslam_core.fusion.acceptance`: χ²
+consistency, the chance test, absorbability, the evidence gate), the robot joins particle by
+particle (:func:`join_filters`):
 
-- its transform: T, or (``per_particle_alignment``) T refitted by least squares on the pair's own
-  copies of the inlier landmarks, so the robot sits consistently in that central particle's map;
-- poses: the central particle's K robots plus the local particle's pose moved by its transform;
-- landmarks: the central particle's map; each matched landmark fused with the local particle's copy
-  by the stationary Kalman step (004 eqs. 4–6, corrected; covariance rotated R·Σ·Rᵀ); the local
-  particle's other landmarks moved and added as new landmarks;
-- weight: equal, or (``pair_likelihood``) the likelihood of the pair's matched landmarks agreeing.
+- every central particle stays as it is (poses, map, weight); each is paired with a local particle
+  drawn by the local weights (systematic), so the pairs sample w_c·w_l;
+- the pair's transform: T, T refitted by least squares on the pair's own copies of the matched
+  landmarks (``per_pair``), T drawn from N(T, Cov T), or a rendezvous anchored per particle;
+- the newcomer's pose: the local particle's pose moved by that transform (its drift and pending
+  motion covariances moved into the common frame, widened by Cov T);
+- landmarks: a matched landmark keeps the common map's copy (T was fitted to it; fusing the local
+  copy would count it twice and let the newcomer move the common map); a central particle that
+  lacks it gets the local copy, moved; the local particle's other landmarks are moved and added;
+- weight: unchanged, or (``pair_likelihood``) times the tempered likelihood of the pair's matched
+  landmarks agreeing.
 
-From then on the robot is one more robot of the joint filter. A robot that restarts (a new local
-filter for a name already in the central filter) goes through the same path; its pose column is
-replaced.
+So a join leaves every robot and landmark already in the central filter as it was. From then on
+the robot is one more robot of the joint filter. A robot that restarts (a new local filter for a
+name already in the central filter) goes through the same path; its pose column is replaced.
 """
 
 from __future__ import annotations
