@@ -66,6 +66,7 @@ from mrslam_core.fusion.alignment import MatchSplit, apply_transform, rigid_tran
 from mrslam_core.fusion.config import FusionConfig
 from mrslam_core.fusion.maps import LandmarkMap
 from mrslam_core.geometry.se2 import wrap_angle
+from mrslam_core.linalg import quad_form, sym_inv_det
 from mrslam_core.slam.filter import MultiRobotFastSLAM
 
 
@@ -152,10 +153,8 @@ def residual_covariances(theta: np.ndarray, cov_t: np.ndarray, cov_s: np.ndarray
 
 
 def mahalanobis2(res: np.ndarray, cov: np.ndarray) -> np.ndarray:
-    """rᵀS⁻¹r for residuals (..., 2) and covariances (..., 2, 2), closed-form 2×2 inverse."""
-    det = cov[..., 0, 0] * cov[..., 1, 1] - cov[..., 0, 1] * cov[..., 1, 0]
-    x, y = res[..., 0], res[..., 1]
-    return (cov[..., 1, 1] * x * x - 2 * cov[..., 0, 1] * x * y + cov[..., 0, 0] * y * y) / det
+    """rᵀS⁻¹r for residuals (..., 2) and covariances (..., 2, 2)."""
+    return quad_form(res, sym_inv_det(cov)[0])
 
 
 def gls_refine(transform: np.ndarray, src: np.ndarray, dst: np.ndarray, cov_s: np.ndarray, cov_t: np.ndarray,
@@ -195,8 +194,8 @@ def contaminated_loglik(res: np.ndarray, cov: np.ndarray, area: float, iteration
     Returns:
         ((...) log-likelihood at the EM's ε, (...) ε).
     """
-    det = cov[..., 0, 0] * cov[..., 1, 1] - cov[..., 0, 1] * cov[..., 1, 0]
-    log_n = -0.5 * mahalanobis2(res, cov) - np.log(2 * np.pi) - 0.5 * np.log(np.maximum(det, 1e-300))
+    inv, det = sym_inv_det(cov)
+    log_n = -0.5 * quad_form(res, inv) - np.log(2 * np.pi) - 0.5 * np.log(np.maximum(det, 1e-300))
     log_out = -np.log(area)
     eps = np.full(res.shape[:-2], 0.5)
     for _ in range(iterations):

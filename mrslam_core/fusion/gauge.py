@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from mrslam_core.geometry.se2 import pose_moments
 from mrslam_core.slam.filter import MultiRobotFastSLAM
 
 
@@ -45,10 +46,7 @@ def hold_gauge(slam: MultiRobotFastSLAM, robots: list[str] | None = None) -> boo
         return False
     ks = np.arange(len(slam.robots)) if robots is None else np.array([slam.index[r] for r in robots], np.int64)
     w = np.exp(slam.log_w)
-    p = slam.poses[:, ks]
-    xy = np.einsum("m,mkd->kd", w, p[..., :2])
-    th = np.arctan2(w @ np.sin(p[..., 2]), w @ np.cos(p[..., 2]))
-    slam.poses[:, ks] = np.concatenate([xy, th[:, None]], axis=1)[None]
     for k in ks.tolist():
+        slam.poses[:, k] = pose_moments(slam.poses[:, k], w)[0]
         slam.pending_cov.pop(k, None)
     return True

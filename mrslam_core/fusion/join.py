@@ -78,11 +78,10 @@ class JoinResult:
 
 
 def move_landmarks(
-    transform: np.ndarray, mean: np.ndarray, cov: np.ndarray, extra_variance: float = 0.0,
-    transform_cov: np.ndarray | None = None,
+    transform: np.ndarray, mean: np.ndarray, cov: np.ndarray, transform_cov: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Landmarks moved by planar transforms (tx, ty, θ): p' = R·p + t, Σ' = R·Σ·Rᵀ (z and its
-    variance unchanged), plus ``extra_variance`` [m²] on x and y, plus (``transform_cov``, the
+    variance unchanged), plus (``transform_cov``, the
     (3, 3) covariance of the transform) J_T·Cov T·J_Tᵀ on x, y with J_T = [I₂ | ∂R/∂θ·p] at
     each landmark's position p before the move.
 
@@ -99,10 +98,8 @@ def move_landmarks(
     off[..., :2] = t[..., :2]
     if t.ndim == 2:  # one transform per particle row: broadcast over the P landmarks
         r, off = r[:, None], off[:, None]
-    add = np.zeros((dim, dim))
-    add[0, 0] = add[1, 1] = extra_variance
     moved = (r @ mean[..., None])[..., 0] + off
-    out = r @ cov @ np.swapaxes(r, -1, -2) + add
+    out = r @ cov @ np.swapaxes(r, -1, -2)
     if transform_cov is not None:
         jac = transform_jacobian(t, mean[..., :2])
         out[..., :2, :2] += jac @ transform_cov @ np.swapaxes(jac, -1, -2)
@@ -160,7 +157,6 @@ def join_filters(
     config: FusionConfig,
     robot: str | None = None,
     drop: np.ndarray | None = None,
-    extra_variance: float = 0.0,
     transform_cov: np.ndarray | None = None,
     per_pair: bool = False,
     pose_cov: np.ndarray | None = None,
@@ -177,9 +173,6 @@ def join_filters(
         config: ``pair_likelihood``, ``pair_likelihood_temper``.
         robot: the robot's name in the central filter (default: the local filter's robot).
         drop: local slots not to carry over.
-        extra_variance: variance [m²] added to x and y of every local landmark moved into the
-            common frame: the uncertainty of the transform itself, which the local covariances
-            do not hold (so the fusion does not trust a misaligned local map over the central one).
         transform_cov: (3, 3) covariance of ``transform``; when given, each joined particle
             draws its own transform from N(transform, transform_cov) and moves its local
             ancestor's pose and landmarks with it, so the joint filter can weigh alignments
@@ -246,7 +239,7 @@ def join_filters(
     if config.pair_likelihood and len(pairs):
         mc, sc, ec = cs_store.gather(anc_c[:, None], cs[None], ("mean", "cov", "exists"))
         ml, sl, el = ls_store.gather(anc_l[:, None], ls[None], ("mean", "cov", "exists"))
-        ml, sl = move_landmarks(t_all, ml.astype(float), sl.astype(float), extra_variance)
+        ml, sl = move_landmarks(t_all, ml.astype(float), sl.astype(float))
         dim = ml.shape[-1]
         inv, det = sym_inv_det(sc.astype(float) + sl)
         ll = -0.5 * (quad_form(mc - ml, inv) + np.log(det) + dim * LOG_2PI)
@@ -275,7 +268,7 @@ def join_filters(
         # particle that lacks the landmark gets the local copy, moved
         ec, = cs_store.gather(anc_c[:, None], cs[None], ("exists",))
         ml, sl, el, nl, scl = ls_store.gather(anc_l[:, None], ls[None], ("mean", "cov", "exists", "count", "score"))
-        ml, sl = move_landmarks(t_all, ml.astype(float), sl.astype(float), extra_variance, lm_cov)
+        ml, sl = move_landmarks(t_all, ml.astype(float), sl.astype(float), lm_cov)
         wi, wp = np.nonzero(el & ~ec)
         if wi.size:
             cs_store.write(wi, cs[wp], mean=ml[wi, wp], cov=sl[wi, wp], exists=True, count=nl[wi, wp],
@@ -295,7 +288,7 @@ def join_filters(
     rest = rest[~skip[rest]]
     if rest.size and config.carry_landmarks:
         mean, cov, ex, cnt = ls_store.gather(anc_l[:, None], rest[None])
-        mean, cov = move_landmarks(t_all, mean.astype(float), cov.astype(float), extra_variance, lm_cov)
+        mean, cov = move_landmarks(t_all, mean.astype(float), cov.astype(float), lm_cov)
         slot_map[rest] = central.insert_landmarks(mean, cov, ex, ls_store.descriptor[rest], cnt)
         cs_store.origin[slot_map[rest]] = ls_store.origin[rest]  # the creating track ids
         cs_store.maker[slot_map[rest]] = central.index[name]
@@ -352,7 +345,7 @@ def join_alignment(
     inl = al.inlier_pairs
     pairs = np.column_stack([target.ids[inl[:, 0]], source.ids[inl[:, 1]]])
     drop = source.ids[al.outlier_pairs[:, 1]] if config.source_outliers == "drop" else None
-    return join_filters(central, local, al.transform, pairs, config, robot, drop, 0.0, None,
+    return join_filters(central, local, al.transform, pairs, config, robot, drop, None,
                         config.per_particle_alignment, pose_cov=al.cov)
 
 

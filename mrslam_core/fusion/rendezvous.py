@@ -26,13 +26,13 @@ the χ²(1) quantile is refused outright.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.stats import chi2
 
-from mrslam_core.fusion.acceptance import Evidence, JoinGate, with_marginals
-from mrslam_core.fusion.alignment import match_descriptors, transform_jacobian
+from mrslam_core.fusion.acceptance import Evidence, JoinGate, mahalanobis2, residual_covariances, with_marginals
+from mrslam_core.fusion.alignment import apply_transform, match_descriptors, transform_jacobian
 from mrslam_core.fusion.config import FusionConfig
 from mrslam_core.fusion.join import JoinResult, join_filters
 from mrslam_core.fusion.maps import LandmarkMap
@@ -60,6 +60,10 @@ class Rendezvous:
     transform_cov: np.ndarray
     range_nis: float = 0.0
     seen: str = ""
+
+    def evidence(self) -> Evidence:
+        """This sighting as evidence for a join (weak: held until another piece agrees)."""
+        return Evidence(self.transform, self.transform_cov, f"sighting with {self.seen}", False, "sighting")
 
 
 def relative_pose(z_ij: np.ndarray, z_ji: np.ndarray, cov_ij: np.ndarray, cov_ji: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -160,15 +164,6 @@ def transform_spread(transforms: np.ndarray, log_w: np.ndarray | None = None) ->
     return pose_moments(t, w)[1]
 
 
-def transform_distance(a: Rendezvous, b: Rendezvous) -> float:
-    """Squared Mahalanobis distance (T_b − T_a)ᵀ(Cov T_a + Cov T_b)⁻¹(T_b − T_a), θ wrapped: χ²(3)
-    when both are of the same local frame (the shared part of the seen robot's pose covariance is
-    counted twice, so the test errs towards agreeing)."""
-    d = np.asarray(b.transform, float) - np.asarray(a.transform, float)
-    d[2] = wrap_angle(d[2])
-    return float(d @ np.linalg.solve(a.transform_cov + b.transform_cov, d))
-
-
 @dataclass
 class RendezvousGate(JoinGate):
     """A :class:`~mrslam_core.fusion.acceptance.JoinGate` that also takes mutual sightings: a
@@ -200,8 +195,7 @@ class RendezvousGate(JoinGate):
                 f"{time_s:.1f} s: sighting with {seen}: the two ranges disagree (normalised "
                 f"{rv.range_nis:.1f} > {self.range_threshold:.1f}): not merged")
             return None
-        ev = Evidence(rv.transform, rv.transform_cov, f"sighting with {seen}", False, "sighting")
-        return rv if self.offer(robot, time_s, ev) is not None else None
+        return rv if self.offer(robot, time_s, replace(rv, seen=seen).evidence()) is not None else None
 
 
 def rendezvous_inliers(rv: Rendezvous, target: LandmarkMap, source: LandmarkMap, matches: np.ndarray,
@@ -211,12 +205,10 @@ def rendezvous_inliers(rv: Rendezvous, target: LandmarkMap, source: LandmarkMap,
     both landmarks' covariances and the transform's (J_T·Cov T·J_Tᵀ at the landmark)."""
     src = source.means[matches[:, 1], :2]
     jac = transform_jacobian(rv.transform, src)
-    floor = jac @ rv.transform_cov @ np.swapaxes(jac, -1, -2)  # (P, 2, 2)
-    c, s = np.cos(rv.transform[2]), np.sin(rv.transform[2])
-    rot = np.array([[c, -s], [s, c]])
-    res = (src @ rot.T + rv.transform[:2]) - target.means[matches[:, 0], :2]
-    cov = target.covs[matches[:, 0], :2, :2] + rot @ source.covs[matches[:, 1], :2, :2] @ rot.T + floor
-    return np.einsum("ni,ni->n", res, np.linalg.solve(cov, res[..., None])[..., 0]) <= chi2.ppf(config.join_confidence, 2)
+    cov = (residual_covariances(rv.transform[2], target.covs[matches[:, 0]], source.covs[matches[:, 1]])
+           + jac @ rv.transform_cov @ np.swapaxes(jac, -1, -2))
+    res = apply_transform(rv.transform, src) - target.means[matches[:, 0], :2]
+    return mahalanobis2(res, cov) <= chi2.ppf(config.join_confidence, 2)
 
 
 def join_rendezvous(
@@ -252,7 +244,7 @@ def join_rendezvous(
             return anchored_transforms(pj[anc_c], pl[anc_l], rv.relative, rv.relative_cov, central.rng)
 
     return join_filters(
-        central, local, rv.transform, pairs, config, robot, drop, 0.0, rv.transform_cov, per_pair=False,
+        central, local, rv.transform, pairs, config, robot, drop, rv.transform_cov, per_pair=False,
         pose_cov=rv.transform_cov, pair_transforms=anchor,
     )
 

@@ -7,6 +7,7 @@ local frame into the common frame, p_common = R·p_local + t.
 import numpy as np
 from scipy.stats import chi2
 
+from mrslam_core.fusion.acceptance import evidence_distance
 from mrslam_core.fusion.config import FusionConfig
 from mrslam_core.fusion.rendezvous import (
     RendezvousGate,
@@ -16,7 +17,6 @@ from mrslam_core.fusion.rendezvous import (
     relative_pose,
     rendezvous_transform,
     sighting_transform,
-    transform_distance,
     transform_spread,
 )
 from mrslam_core.geometry.se2 import between, compose, inverse, wrap_angle
@@ -109,7 +109,7 @@ def test_a_single_mutual_sighting_is_held_and_a_consistent_second_one_merges():
     first = _sighting(central, local, z_ij, z_ji, rng)
     assert gate.offer_sighting("b", 20.0, "a", first) is None and "held" in gate.log["b"][-1]
     second = _sighting(central, local, z_ij, z_ji, rng)
-    assert transform_distance(first, second) < gate.threshold
+    assert evidence_distance(first.evidence(), second.evidence()) < gate.threshold
     ok = gate.offer_sighting("b", 20.4, "a", second)
     assert ok is second and "b" not in gate.held
     res = join_rendezvous(central, local, "b", ok, cfg)
@@ -132,7 +132,7 @@ def test_a_corrupted_sighting_does_not_merge_and_says_why():
     misread = _sighting(central, local, range_bearing(x_i, x_k), z_ji, rng)
     too_far = _sighting(central, local, z_ij + np.array([1.5, 0.0]), z_ji, rng)
     assert gate.offer_sighting("b", 30.0, "a", good) is None
-    assert transform_distance(good, misread) > gate.threshold
+    assert evidence_distance(good.evidence(), misread.evidence()) > gate.threshold
     assert gate.offer_sighting("b", 30.2, "a", misread) is None
     assert "sighting with a disagrees with held evidence" in gate.log["b"][-1] and "not joined" in gate.log["b"][-1]
     assert too_far.range_nis > gate.range_threshold > good.range_nis
