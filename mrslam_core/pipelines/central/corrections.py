@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from mrslam_core.geometry.se2 import between, compose, pose_moments, wrap_angle
+from mrslam_core.geometry.se2 import between, compose, inverse, pose_moments, wrap_angle
 from mrslam_core.pipelines.central.config import CentralConfig
 from mrslam_core.pipelines.central.map_move import (MoveResult, candidate_pairs, frame_log_likelihood, lost_or_not,
                                                    refine)
@@ -250,11 +250,34 @@ class Corrections:
                 "turn_rad": float(wrap_angle(al.transform[2] - est[2])),
                 "transform": [float(v) for v in al.transform]})
         if res.lost.any():
+            self._move_window_landmarks(slam, k, res, int(obs.stamp_ns - mc.window * 1e9))
             slam.poses[:, k] = res.poses
         if moved:
             slam.tracks.pop(k, None)  # its tracks went to landmarks seen from the old poses
             if mc.poses == "estimate":  # the recent sets were placed by the poses just replaced
                 self._recent[obs.robot].clear()
+
+    @staticmethod
+    def _move_window_landmarks(slam: MultiRobotFastSLAM, k: int, res: MoveResult, since_ns: int) -> None:
+        """In each particle that found robot k lost, move the landmarks k created since ``since_ns``
+        (the check's window) with the robot: by T_m = x'_m ⊕ x_m⁻¹, x_m its pose before, x'_m after.
+
+        They were placed from the window's poses, the poses the check found off by T_m; left
+        where they are, the robot meets them at once from its new pose and the filter's own update
+        (they are the nearest, freshest landmarks) draws it back into the frame it was lost in."""
+        from mrslam_core.fusion.join import move_landmarks
+
+        store = slam.landmarks
+        slots = np.flatnonzero((store.maker[: store.size] == k) & (store.born[: store.size] >= since_ns))
+        m = np.flatnonzero(res.lost)
+        if slots.size == 0 or m.size == 0:
+            return
+        mean, cov, held = store.gather(m[:, None], slots[None, :], ("mean", "cov", "exists"))
+        correction = compose(res.poses[m], inverse(slam.poses[m, k]))  # (L, 3) map frame
+        mean, cov = move_landmarks(correction, mean, cov)
+        mi, si = np.nonzero(held)
+        store.write(m[mi], slots[si], mean=mean[mi, si], cov=cov[mi, si])
+        store.refresh_reference(slots)
 
     def map_near(self, slam: MultiRobotFastSLAM, pose: np.ndarray, points: np.ndarray, margin: float,
                  born_before: float | None = None):
