@@ -81,6 +81,8 @@ class Corrections:
         self._checked: dict[str, int] = {}
         #: each robot's last agreeing map check [ns]
         self._agreed: dict[str, int] = {}
+        #: each robot's last map check that moved it in no particle [ns]
+        self._unmoved: dict[str, int] = {}
 
     # ------------------------------------------------------------------ the mapper's calls
     def before_step(self, slam: MultiRobotFastSLAM, filt: MultiRobotFastSLAM, obs: ObservationSet,
@@ -112,7 +114,7 @@ class Corrections:
 
     def forget(self, robot: str) -> None:
         """Drop what is remembered of ``robot`` (its odometry restarted: it is mapped anew)."""
-        for state in (self._returning, self._reloc_tried, self._checked, self._agreed):
+        for state in (self._returning, self._reloc_tried, self._checked, self._agreed, self._unmoved):
             state.pop(robot, None)
         self._recent[robot].clear()
 
@@ -250,8 +252,13 @@ class Corrections:
                 "turn_rad": float(wrap_angle(al.transform[2] - est[2])),
                 "transform": [float(v) for v in al.transform]})
         if res.lost.any():
-            self._move_window_landmarks(slam, k, res, int(obs.stamp_ns - mc.window * 1e9))
+            # the sets the check weighed, after the last check that confirmed the robot in every
+            # particle: the ones the alignment says were placed off
+            since = max(int(obs.stamp_ns - mc.window * 1e9), self._unmoved.get(obs.robot, -1))
+            self._move_window_landmarks(slam, k, res, since)
             slam.poses[:, k] = res.poses
+        else:
+            self._unmoved[obs.robot] = int(obs.stamp_ns)
         if moved:
             slam.tracks.pop(k, None)  # its tracks went to landmarks seen from the old poses
             if mc.poses == "estimate":  # the recent sets were placed by the poses just replaced
@@ -260,7 +267,7 @@ class Corrections:
     @staticmethod
     def _move_window_landmarks(slam: MultiRobotFastSLAM, k: int, res: MoveResult, since_ns: int) -> None:
         """In each particle that found robot k lost, move the landmarks k created since ``since_ns``
-        (the check's window) with the robot: by T_m = x'_m ⊕ x_m⁻¹, x_m its pose before, x'_m after.
+        with the robot: by T_m = x'_m ⊕ x_m⁻¹, x_m its pose before, x'_m after.
 
         They were placed from the window's poses, the poses the check found off by T_m; left
         where they are, the robot meets them at once from its new pose and the filter's own update
@@ -353,14 +360,14 @@ class Corrections:
     def state(self) -> dict[str, Any]:
         """Everything above as JSON values and arrays: ``relocalizations``, ``map_checks``,
         ``distrusted``, ``returning`` (robot: [attempts left, gap start ns]),
-        ``reloc_tried``, ``checked``, ``agreed``, ``recent`` ([robot, stamp_ns, pose (3)] in each
+        ``reloc_tried``, ``checked``, ``agreed``, ``unmoved``, ``recent`` ([robot, stamp_ns, pose (3)] in each
         robot's order) with the sets' arrays (``recent_*_{i}``)."""
         recent = [(r, s, at, o) for r in self.robots for s, at, o in self._recent[r]]
         return {
             "relocalizations": [dict(e) for e in self.relocalizations], "map_checks": dict(self.map_checks),
             "distrusted": [list(d) for d in self.distrusted],
             "returning": {r: list(v) for r, v in self._returning.items()}, "reloc_tried": dict(self._reloc_tried),
-            "checked": dict(self._checked), "agreed": dict(self._agreed),
+            "checked": dict(self._checked), "agreed": dict(self._agreed), "unmoved": dict(self._unmoved),
             "recent": [[r, s, *map(float, at)] for r, s, at, _ in recent],
             **sets_state("recent", [o for *_, o in recent]),
         }
@@ -375,6 +382,7 @@ class Corrections:
         self._reloc_tried = {r: int(v) for r, v in state.get("reloc_tried", {}).items()}
         self._checked = {r: int(v) for r, v in state.get("checked", {}).items()}
         self._agreed = {r: int(v) for r, v in state.get("agreed", {}).items()}
+        self._unmoved = {r: int(v) for r, v in state.get("unmoved", {}).items()}
         for i, (robot, stamp, *at) in enumerate(state.get("recent", [])):
             obs = set_from_state(state, "recent", i, robot, stamp)
             self._recent[robot].append((int(stamp), np.array(at, float), obs))
