@@ -253,9 +253,12 @@ class Corrections:
                 "transform": [float(v) for v in al.transform]})
         if res.lost.any():
             # the sets the check weighed, after the last check that confirmed the robot in every
-            # particle: the ones the alignment says were placed off
+            # particle: the ones the alignment says were placed off. Where most particles moved
+            # it, in every particle: a particle left in the lost frame keeps its landmarks of that
+            # frame and explains the next sets better than the moved ones, whose landmarks there
+            # are gone, and resampling would pick it
             since = max(int(obs.stamp_ns - mc.window * 1e9), self._unmoved.get(obs.robot, -1))
-            self._move_window_landmarks(slam, k, res, since)
+            self._drop_window_landmarks(slam, k, np.ones_like(res.lost) if moved else res.lost, since)
             slam.poses[:, k] = res.poses
         else:
             self._unmoved[obs.robot] = int(obs.stamp_ns)
@@ -265,25 +268,22 @@ class Corrections:
                 self._recent[obs.robot].clear()
 
     @staticmethod
-    def _move_window_landmarks(slam: MultiRobotFastSLAM, k: int, res: MoveResult, since_ns: int) -> None:
-        """In each particle that found robot k lost, move the landmarks k created since ``since_ns``
-        with the robot: by T_m = x'_m ⊕ x_m⁻¹, x_m its pose before, x'_m after.
+    def _drop_window_landmarks(slam: MultiRobotFastSLAM, k: int, where: np.ndarray, since_ns: int) -> None:
+        """In the particles ``where`` (M,) bool, drop the landmarks robot k created since ``since_ns``.
 
-        They were placed from the window's poses, the poses the check found off by T_m; left
-        where they are, the robot meets them at once from its new pose and the filter's own update
-        (they are the nearest, freshest landmarks) draws it back into the frame it was lost in."""
-        from mrslam_core.fusion.join import move_landmarks
-
+        They were placed from the poses the check found off. Left in the map, the robot meets
+        them at once from its new pose and the filter's own update (they are the nearest,
+        freshest landmarks) draws it back into the frame it was lost in; the robot maps the
+        place again from the new pose. Dropped rather than moved with the robot: a move that a
+        look-alike caused, and a later check undoes, then leaves no landmark displaced."""
         store = slam.landmarks
         slots = np.flatnonzero((store.maker[: store.size] == k) & (store.born[: store.size] >= since_ns))
-        m = np.flatnonzero(res.lost)
+        m = np.flatnonzero(where)
         if slots.size == 0 or m.size == 0:
             return
-        mean, cov, held = store.gather(m[:, None], slots[None, :], ("mean", "cov", "exists"))
-        correction = compose(res.poses[m], inverse(slam.poses[m, k]))  # (L, 3) map frame
-        mean, cov = move_landmarks(correction, mean, cov)
+        (held,) = store.gather(m[:, None], slots[None, :], ("exists",))
         mi, si = np.nonzero(held)
-        store.write(m[mi], slots[si], mean=mean[mi, si], cov=cov[mi, si])
+        store.write(m[mi], slots[si], exists=False)
         store.refresh_reference(slots)
 
     def map_near(self, slam: MultiRobotFastSLAM, pose: np.ndarray, points: np.ndarray, margin: float,
