@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from mrslam_core.geometry.se2 import between, compose, pose_moments, wrap_angle
+from mrslam_core.geometry.se2 import between, compose, inverse, pose_moments, wrap_angle
 from mrslam_core.pipelines.central.config import CentralConfig
 from mrslam_core.pipelines.central.map_move import (MoveResult, candidate_pairs, frame_log_likelihood, lost_or_not,
                                                    refine)
@@ -81,6 +81,8 @@ class Corrections:
         self._checked: dict[str, int] = {}
         #: each robot's last agreeing map check [ns]
         self._agreed: dict[str, int] = {}
+        #: each robot's last map check that moved it in no particle [ns]
+        self._unmoved: dict[str, int] = {}
 
     # ------------------------------------------------------------------ the mapper's calls
     def before_step(self, slam: MultiRobotFastSLAM, filt: MultiRobotFastSLAM, obs: ObservationSet,
@@ -112,7 +114,7 @@ class Corrections:
 
     def forget(self, robot: str) -> None:
         """Drop what is remembered of ``robot`` (its odometry restarted: it is mapped anew)."""
-        for state in (self._returning, self._reloc_tried, self._checked, self._agreed):
+        for state in (self._returning, self._reloc_tried, self._checked, self._agreed, self._unmoved):
             state.pop(robot, None)
         self._recent[robot].clear()
 
@@ -250,11 +252,39 @@ class Corrections:
                 "turn_rad": float(wrap_angle(al.transform[2] - est[2])),
                 "transform": [float(v) for v in al.transform]})
         if res.lost.any():
+            # the sets the check weighed, after the last check that confirmed the robot in every
+            # particle: the ones the alignment says were placed off. Where most particles moved
+            # it, in every particle: a particle left in the lost frame keeps its landmarks of that
+            # frame and explains the next sets better than the moved ones, whose landmarks there
+            # are gone, and resampling would pick it
+            since = max(int(obs.stamp_ns - mc.window * 1e9), self._unmoved.get(obs.robot, -1))
+            self._drop_window_landmarks(slam, k, np.ones_like(res.lost) if moved else res.lost, since)
             slam.poses[:, k] = res.poses
+        else:
+            self._unmoved[obs.robot] = int(obs.stamp_ns)
         if moved:
             slam.tracks.pop(k, None)  # its tracks went to landmarks seen from the old poses
             if mc.poses == "estimate":  # the recent sets were placed by the poses just replaced
                 self._recent[obs.robot].clear()
+
+    @staticmethod
+    def _drop_window_landmarks(slam: MultiRobotFastSLAM, k: int, where: np.ndarray, since_ns: int) -> None:
+        """In the particles ``where`` (M,) bool, drop the landmarks robot k created since ``since_ns``.
+
+        They were placed from the poses the check found off. Left in the map, the robot meets
+        them at once from its new pose and the filter's own update (they are the nearest,
+        freshest landmarks) draws it back into the frame it was lost in; the robot maps the
+        place again from the new pose. Dropped rather than moved with the robot: a move that a
+        look-alike caused, and a later check undoes, then leaves no landmark displaced."""
+        store = slam.landmarks
+        slots = np.flatnonzero((store.maker[: store.size] == k) & (store.born[: store.size] >= since_ns))
+        m = np.flatnonzero(where)
+        if slots.size == 0 or m.size == 0:
+            return
+        (held,) = store.gather(m[:, None], slots[None, :], ("exists",))
+        mi, si = np.nonzero(held)
+        store.write(m[mi], slots[si], exists=False)
+        store.refresh_reference(slots)
 
     def map_near(self, slam: MultiRobotFastSLAM, pose: np.ndarray, points: np.ndarray, margin: float,
                  born_before: float | None = None):
@@ -330,14 +360,14 @@ class Corrections:
     def state(self) -> dict[str, Any]:
         """Everything above as JSON values and arrays: ``relocalizations``, ``map_checks``,
         ``distrusted``, ``returning`` (robot: [attempts left, gap start ns]),
-        ``reloc_tried``, ``checked``, ``agreed``, ``recent`` ([robot, stamp_ns, pose (3)] in each
+        ``reloc_tried``, ``checked``, ``agreed``, ``unmoved``, ``recent`` ([robot, stamp_ns, pose (3)] in each
         robot's order) with the sets' arrays (``recent_*_{i}``)."""
         recent = [(r, s, at, o) for r in self.robots for s, at, o in self._recent[r]]
         return {
             "relocalizations": [dict(e) for e in self.relocalizations], "map_checks": dict(self.map_checks),
             "distrusted": [list(d) for d in self.distrusted],
             "returning": {r: list(v) for r, v in self._returning.items()}, "reloc_tried": dict(self._reloc_tried),
-            "checked": dict(self._checked), "agreed": dict(self._agreed),
+            "checked": dict(self._checked), "agreed": dict(self._agreed), "unmoved": dict(self._unmoved),
             "recent": [[r, s, *map(float, at)] for r, s, at, _ in recent],
             **sets_state("recent", [o for *_, o in recent]),
         }
@@ -352,6 +382,7 @@ class Corrections:
         self._reloc_tried = {r: int(v) for r, v in state.get("reloc_tried", {}).items()}
         self._checked = {r: int(v) for r, v in state.get("checked", {}).items()}
         self._agreed = {r: int(v) for r, v in state.get("agreed", {}).items()}
+        self._unmoved = {r: int(v) for r, v in state.get("unmoved", {}).items()}
         for i, (robot, stamp, *at) in enumerate(state.get("recent", [])):
             obs = set_from_state(state, "recent", i, robot, stamp)
             self._recent[robot].append((int(stamp), np.array(at, float), obs))
