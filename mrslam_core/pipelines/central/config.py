@@ -28,7 +28,10 @@ class MapCheckConfig:
     are younger and left out. Whether the robot is where its filter says or lost is then decided
     in every particle by the posterior odds of the two under the frame's likelihood against that
     particle's older landmarks (:mod:`~mrslam_core.pipelines.central.map_move`): a lost robot is
-    moved to a pose drawn from the alignment, in the particles that find it lost. A robot whose
+    moved to a pose drawn from the alignment, in the particles that find it lost, and the
+    landmarks it made in the window since the last check that confirmed it are dropped (in every
+    particle when most moved it): left in the map, they drew the moved robot straight back
+    (docs/results.md, "A late loss traced"). A robot whose
     wheels slipped while it saw nothing comes back several degrees off, and then maps a corridor
     mapped before as a new one, turned: no association gate reaches landmarks 0.3 m away, while
     descriptors do. The same decision places a robot back from a gap (``relocalize_after``).

@@ -4,8 +4,9 @@ One decision serves both occasions: a robot back from a gap (silent for longer t
 ``relocalize_after``), and every ``map_check.every`` seconds each robot, is aligned to the older
 map, and whether it is where its filter says or lost is decided in every particle by the
 posterior odds of the two (:mod:`~mrslam_core.pipelines.central.map_move`); a lost robot takes a
-pose drawn from the alignment in the particles that find it lost. The motion over a long gap
-(``sample_gap``) is sampled before the set is associated. The mapper calls these at fixed points
+pose drawn from the alignment in the particles that find it lost, and the landmarks it made from
+the poses the check found off are dropped (:meth:`Corrections._drop_window_landmarks`). The
+motion over a long gap (``sample_gap``) is sampled before the set is associated. The mapper calls these at fixed points
 of an update (:meth:`Corrections.before_step`, :meth:`Corrections.hold`,
 :meth:`Corrections.after_step`, :meth:`Corrections.forget`).
 """
@@ -19,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from mrslam_core.geometry.se2 import between, compose, inverse, pose_moments, wrap_angle
+from mrslam_core.geometry.se2 import between, compose, pose_moments, wrap_angle
 from mrslam_core.pipelines.central.config import CentralConfig
 from mrslam_core.pipelines.central.map_move import (MoveResult, candidate_pairs, frame_log_likelihood, lost_or_not,
                                                    refine)
@@ -360,8 +361,8 @@ class Corrections:
     def state(self) -> dict[str, Any]:
         """Everything above as JSON values and arrays: ``relocalizations``, ``map_checks``,
         ``distrusted``, ``returning`` (robot: [attempts left, gap start ns]),
-        ``reloc_tried``, ``checked``, ``agreed``, ``unmoved``, ``recent`` ([robot, stamp_ns, pose (3)] in each
-        robot's order) with the sets' arrays (``recent_*_{i}``)."""
+        ``reloc_tried``, ``checked``, ``agreed``, ``unmoved``, ``recent`` ([robot, stamp_ns, pose
+        (3)] in each robot's order) with the sets' arrays (``recent_*_{i}``)."""
         recent = [(r, s, at, o) for r in self.robots for s, at, o in self._recent[r]]
         return {
             "relocalizations": [dict(e) for e in self.relocalizations], "map_checks": dict(self.map_checks),
