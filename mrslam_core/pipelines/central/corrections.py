@@ -6,9 +6,9 @@ map, and whether it is where its filter says or lost is decided in every particl
 posterior odds of the two (:mod:`~mrslam_core.pipelines.central.map_move`); a lost robot takes a
 pose drawn from the alignment in the particles that find it lost, and the landmarks it made from
 the poses the check found off are dropped (:meth:`Corrections._drop_window_landmarks`). The
-motion over a long gap (``sample_gap``) is sampled before the set is associated. The mapper calls these at fixed points
-of an update (:meth:`Corrections.before_step`, :meth:`Corrections.hold`,
-:meth:`Corrections.after_step`, :meth:`Corrections.forget`).
+motion over a long gap (``sample_gap``) is sampled before the set is associated. The mapper
+calls these at fixed points of an update (:meth:`Corrections.before_step`,
+:meth:`Corrections.hold`, :meth:`Corrections.after_step`, :meth:`Corrections.forget`).
 """
 
 from __future__ import annotations
@@ -270,7 +270,8 @@ class Corrections:
 
     @staticmethod
     def _drop_window_landmarks(slam: MultiRobotFastSLAM, k: int, where: np.ndarray, since_ns: int) -> None:
-        """In the particles ``where`` (M,) bool, drop the landmarks robot k created since ``since_ns``.
+        """In the particles ``where`` (M,) bool, drop the landmarks robot k created since
+        ``since_ns`` [ns].
 
         They were placed from the poses the check found off. Left in the map, the robot meets
         them at once from its new pose and the filter's own update (they are the nearest,
