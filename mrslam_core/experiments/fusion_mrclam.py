@@ -207,7 +207,7 @@ def run_unknown_start(ds: MrclamDataset, cfg: MrclamFusionConfig, progress: bool
                 if meet is None:
                     continue
                 j, z_ij, z_ji = meet
-                rv = gate.offer_sighting(name[i], float(times[k] - t0), name[j],
+                rv = gate.offer_sighting(name[i], float(times[k] - t0),
                                          sighting_transform(central, local[i], name[j], z_ij, z_ji, rr_cov, rr_cov))
                 if rv is None:  # held until a second sighting agrees, or refused
                     attempts[name[i]].append(gate.log[name[i]][-1])

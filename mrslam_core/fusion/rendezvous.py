@@ -182,8 +182,8 @@ class RendezvousGate(JoinGate):
         p = config.join_confidence
         return cls(config.evidence_window, float(chi2.ppf(p, 3)), range_threshold=float(chi2.ppf(p, 1)))
 
-    def offer_sighting(self, robot: str, time_s: float, seen: str, rv: Rendezvous) -> Rendezvous | None:
-        """A new mutual sighting of ``robot`` with ``seen`` at ``time_s`` [s].
+    def offer_sighting(self, robot: str, time_s: float, rv: Rendezvous) -> Rendezvous | None:
+        """A new mutual sighting ``rv`` of ``robot`` with ``rv.seen`` at ``time_s`` [s].
 
         Returns:
             ``rv`` when held evidence (an earlier sighting, an alignment) agrees with it or no
@@ -192,10 +192,10 @@ class RendezvousGate(JoinGate):
         """
         if self.window is not None and not rv.range_nis <= self.range_threshold:
             self.log.setdefault(robot, []).append(
-                f"{time_s:.1f} s: sighting with {seen}: the two ranges disagree (normalised "
+                f"{time_s:.1f} s: sighting with {rv.seen}: the two ranges disagree (normalised "
                 f"{rv.range_nis:.1f} > {self.range_threshold:.1f}): not merged")
             return None
-        return rv if self.offer(robot, time_s, replace(rv, seen=seen).evidence()) is not None else None
+        return rv if self.offer(robot, time_s, rv.evidence()) is not None else None
 
 
 def rendezvous_inliers(rv: Rendezvous, target: LandmarkMap, source: LandmarkMap, matches: np.ndarray,

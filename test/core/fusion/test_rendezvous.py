@@ -107,10 +107,10 @@ def test_a_single_mutual_sighting_is_held_and_a_consistent_second_one_merges():
     gate = RendezvousGate.from_config(cfg)
     z_ij, z_ji = range_bearing(x_i, x_j), range_bearing(x_j, x_i)
     first = _sighting(central, local, z_ij, z_ji, rng)
-    assert gate.offer_sighting("b", 20.0, "a", first) is None and "held" in gate.log["b"][-1]
+    assert gate.offer_sighting("b", 20.0, first) is None and "held" in gate.log["b"][-1]
     second = _sighting(central, local, z_ij, z_ji, rng)
     assert evidence_distance(first.evidence(), second.evidence()) < gate.threshold
-    ok = gate.offer_sighting("b", 20.4, "a", second)
+    ok = gate.offer_sighting("b", 20.4, second)
     assert ok is second and "b" not in gate.held
     res = join_rendezvous(central, local, "b", ok, cfg)
     assert central.robots == ["a", "b"] and res.robot == "b"
@@ -131,17 +131,17 @@ def test_a_corrupted_sighting_does_not_merge_and_says_why():
     good = _sighting(central, local, z_ij, z_ji, rng)
     misread = _sighting(central, local, range_bearing(x_i, x_k), z_ji, rng)
     too_far = _sighting(central, local, z_ij + np.array([1.5, 0.0]), z_ji, rng)
-    assert gate.offer_sighting("b", 30.0, "a", good) is None
+    assert gate.offer_sighting("b", 30.0, good) is None
     assert evidence_distance(good.evidence(), misread.evidence()) > gate.threshold
-    assert gate.offer_sighting("b", 30.2, "a", misread) is None
+    assert gate.offer_sighting("b", 30.2, misread) is None
     assert "sighting with a disagrees with held evidence" in gate.log["b"][-1] and "not joined" in gate.log["b"][-1]
     assert too_far.range_nis > gate.range_threshold > good.range_nis
-    assert gate.offer_sighting("b", 30.4, "a", too_far) is None
+    assert gate.offer_sighting("b", 30.4, too_far) is None
     assert "ranges disagree" in gate.log["b"][-1]
     assert [h[0] for h in gate.held["b"]] == [30.0, 30.2]  # the refused one is not even held
     assert len(central.robots) == 1  # nothing merged
     again = _sighting(central, local, z_ij, z_ji, rng)
-    assert gate.offer_sighting("b", 31.0, "a", again) is again
+    assert gate.offer_sighting("b", 31.0, again) is again
 
 
 def test_a_corrupted_first_sighting_is_outvoted_and_old_sightings_expire():
@@ -149,16 +149,16 @@ def test_a_corrupted_first_sighting_is_outvoted_and_old_sightings_expire():
     rng = np.random.default_rng(7)
     gate = RendezvousGate.from_config(FusionConfig(evidence_window=5.0))
     z_ij, z_ji = range_bearing(x_i, x_j), range_bearing(x_j, x_i)
-    assert gate.offer_sighting("b", 10.0, "a", _sighting(central, local, range_bearing(x_i, x_k), z_ji, rng)) is None
-    assert gate.offer_sighting("b", 10.2, "a", _sighting(central, local, z_ij, z_ji, rng)) is None
+    assert gate.offer_sighting("b", 10.0, _sighting(central, local, range_bearing(x_i, x_k), z_ji, rng)) is None
+    assert gate.offer_sighting("b", 10.2, _sighting(central, local, z_ij, z_ji, rng)) is None
     late = _sighting(central, local, z_ij, z_ji, rng)
-    assert gate.offer_sighting("b", 16.0, "a", late) is None  # the correct one at 10.2 s is 5.8 s old
+    assert gate.offer_sighting("b", 16.0, late) is None  # the correct one at 10.2 s is 5.8 s old
     assert "held" in gate.log["b"][-1]
     confirm = _sighting(central, local, z_ij, z_ji, rng)
-    assert gate.offer_sighting("b", 16.2, "a", confirm) is confirm
+    assert gate.offer_sighting("b", 16.2, confirm) is confirm
     # no window: one sighting is trusted as it is
     single = RendezvousGate.from_config(FusionConfig(evidence_window=None))
-    assert single.offer_sighting("b", 1.0, "a", confirm) is confirm
+    assert single.offer_sighting("b", 1.0, confirm) is confirm
 
 
 def test_anchored_transforms_put_every_particle_at_its_own_sighting_pose():
