@@ -115,6 +115,7 @@ def slam_params(cfg: DemoConfig, facts: dict, out: Path):
 
     return SlamNodeConfig(robots=tuple(facts["names"]), start_poses=tuple(float(v) for v in facts["starts"].ravel()),
                           max_wait=cfg.max_wait, filter=cfg.team.filter, map_check=cfg.team.map_check,
+                          odometry=(cfg.team.odometry,), wheel_motion=cfg.team.filter.motion,
                           output_dir=str(out / "slam"),
                           checkpoint=str(out / "slam" / "checkpoint.npz"), checkpoint_period=cfg.checkpoint_period)
 

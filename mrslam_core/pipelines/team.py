@@ -29,8 +29,9 @@ from mrslam_core.frontend.camera import StereoRig
 from mrslam_core.frontend.config import FrontendConfig
 from mrslam_core.frontend.frontend import Frontend
 from mrslam_core.frontend.odometry import planar_motion
-from mrslam_core.geometry.se2 import between
+from mrslam_core.geometry.se2 import between, planar_from_matrix
 from mrslam_core.pipelines.central import CentralConfig, CentralMapper, MapCheckConfig
+from mrslam_core.pipelines.odometry import SOURCES, OdometryFusion, visual_twist_covariance
 from mrslam_core.sim.config import SimConfig
 from mrslam_core.sim.simulation import Simulation
 from mrslam_core.slam.config import FilterConfig
@@ -51,6 +52,10 @@ class TeamConfig:
         explore: send the robots to frontiers (else they stand still).
         map_check: the central mapper's check of each robot against the older map (also the
             demo's central node's).
+        odometry: what the central mapper takes as each robot's odometry: ``wheel`` (the
+            simulator's), ``visual`` (the frontend's visual odometry) or ``fused`` (both, step by
+            step with their information matrices, :class:`OdometryFusion`, the wheels' noise
+            model being ``filter.motion``). The frontends' search windows follow the wheels in all.
         frontend, filter, exploration, control: by default the simulated team profile
             (config/sim_team.yaml).
     """
@@ -59,6 +64,7 @@ class TeamConfig:
     seconds: float = 120.0
     control_period: float = 0.2
     explore: bool = True
+    odometry: str = "wheel"
     sim: SimConfig = field(default_factory=SimConfig)
     frontend: FrontendConfig = field(default_factory=lambda: profile_section(FrontendConfig, TEAM_PROFILE, "frontend"))
     filter: FilterConfig = field(default_factory=lambda: profile_section(FilterConfig, TEAM_PROFILE, "filter"))
@@ -70,6 +76,8 @@ class TeamConfig:
     def __post_init__(self) -> None:
         if self.robots < 1 or not self.seconds > 0 or not self.control_period > 0:
             raise ValueError("need robots >= 1, seconds > 0 and control_period > 0")
+        if self.odometry not in SOURCES:
+            raise ValueError(f"odometry must be one of {SOURCES}, not {self.odometry!r}")
 
 
 def run(cfg: TeamConfig, progress: bool = False, coverage_every: float = 0.0) -> dict:
@@ -93,8 +101,9 @@ def run(cfg: TeamConfig, progress: bool = False, coverage_every: float = 0.0) ->
     explorer = Explorer(cfg.exploration, names, Controller(cfg.control))
     odom0 = {n: sim.odometry(n)[0] for n in names}
     at_frame = dict(odom0)  # each robot's odometry at its previous frame: the frontend's motion prior
+    feed = _OdometryFeed(cfg, mapper, names)
     for n in names:
-        mapper.add_odometry(n, sim.time_ns, odom0[n])
+        feed.wheel(n, sim.time_ns, odom0[n])
     rec = {n: {"t": [0.0], "est": [starts[i]], "gt": [starts[i]], "odom": [starts[i]]} for i, n in enumerate(names)}
     next_control = 0
     control_ns = int(cfg.control_period * 1e9)
@@ -112,7 +121,8 @@ def run(cfg: TeamConfig, progress: bool = False, coverage_every: float = 0.0) ->
             delta = between(at_frame[n], odom)
             at_frame[n] = odom
             obs, scan = frontends[n].step(frame.left, frame.right, frame.stamp_ns, odometry=planar_motion(delta))
-            mapper.add_odometry(n, frame.stamp_ns, odom)
+            feed.wheel(n, frame.stamp_ns, odom)
+            feed.visual(n, frontends[n].odometry)
             if obs is None:  # a dropped frame: the next set carries its motion
                 continue
             mapper.add_observations(obs)
@@ -125,7 +135,7 @@ def run(cfg: TeamConfig, progress: bool = False, coverage_every: float = 0.0) ->
             r["t"].append(done.stamp_ns * 1e-9)
             r["est"].append(done.pose)
             r["gt"].append(sim.ground_truth(n))
-            r["odom"].append(_odom_in_map(starts[names.index(n)], odom0[n], done.odom))
+            r["odom"].append(_odom_in_map(starts[names.index(n)], feed.first[n], done.odom))
             if scans.get(n) is not None:  # the other robots at their newest estimates
                 grid.insert(done.pose, Scan.from_obstacle_scan(scans[n]), [rec[o]["est"][-1][:2] for o in names if o != n])
         if coverage is not None and sim.time_ns >= next_coverage:
@@ -158,6 +168,45 @@ def run(cfg: TeamConfig, progress: bool = False, coverage_every: float = 0.0) ->
                       "resolution": grid.res, "free_thresh": cfg.grid.free_below,
                       "occupied_thresh": cfg.grid.occupied_above} if grid.observed.size else None,  # None: no scan came
     }
+
+
+class _OdometryFeed:
+    """Each robot's odometry into the central mapper from the configured source (``cfg.odometry``).
+
+    ``first[robot]``: the robot's first odometry pose given to the mapper (3,), the start of its
+    dead reckoning.
+    """
+
+    def __init__(self, cfg: TeamConfig, mapper: CentralMapper, names: list[str]):
+        self.source = cfg.odometry
+        self.mapper = mapper
+        self.fusion = {n: OdometryFusion(cfg.filter.motion) for n in names} if self.source == "fused" else {}
+        self.first: dict[str, np.ndarray] = {}
+        self._vo_stamp: dict[str, int] = {}
+
+    def wheel(self, robot: str, stamp_ns: int, pose: np.ndarray) -> None:
+        if self.source == "wheel":
+            self._give(robot, [(stamp_ns, pose)])
+        elif self.source == "fused":
+            self._give(robot, self.fusion[robot].add_wheel(stamp_ns, pose))
+
+    def visual(self, robot: str, vo) -> None:
+        """The frontend's visual odometry after a frame (:class:`VisualOdometry`, None before one)."""
+        if self.source == "wheel" or vo is None or self._vo_stamp.get(robot) == vo.stamp_ns:
+            return
+        prev = self._vo_stamp.get(robot)
+        self._vo_stamp[robot] = vo.stamp_ns
+        pose = planar_from_matrix(vo.pose)
+        if self.source == "visual":
+            self._give(robot, [(vo.stamp_ns, pose)])
+            return
+        dt = 0.0 if prev is None else (vo.stamp_ns - prev) * 1e-9
+        self._give(robot, self.fusion[robot].add_visual(vo.stamp_ns, pose, visual_twist_covariance(vo.cov, dt)))
+
+    def _give(self, robot: str, poses: list[tuple[int, np.ndarray]]) -> None:
+        for stamp, pose in poses:
+            self.first.setdefault(robot, np.asarray(pose, float))
+            self.mapper.add_odometry(robot, stamp, pose)
 
 
 def write_team_run(out: str | Path, cfg: TeamConfig, res: dict) -> dict:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mrslam_core.pipelines.odometry import OdometryFusion, fuse_steps, propagate_planar
+from mrslam_core.pipelines.odometry import OdometryFusion, fuse_steps, propagate_planar, visual_twist_covariance
 from mrslam_core.slam.config import MotionConfig
 
 
@@ -59,3 +59,19 @@ def test_planar_covariance_propagation():
     # facing +y, a step along the body x moves along the map y
     c = propagate_planar(np.zeros((3, 3)), np.array([0.0, 0.0, np.pi / 2]), np.array([1.0, 0, 0]), q)
     np.testing.assert_allclose(np.diag(c), [0.02, 0.01, 0.03], atol=1e-15)
+
+
+def test_the_visual_twist_covariance_is_the_planar_part_of_the_step_over_the_interval():
+    # VisualOdometry.cov orders (δθx, δθy, δθz, δtx, δty, δtz); the planar twist is (vx, vy, ωz)
+    cov6 = np.diag([1.0, 2.0, 3.0, 4.0, 5.0, 6.0])
+    cov6[3, 2] = cov6[2, 3] = 0.5
+    np.testing.assert_allclose(visual_twist_covariance(cov6, 0.2), np.array([[4.0, 0, 0.5], [0, 5.0, 0], [0.5, 0, 3.0]]) / 0.04)
+    np.testing.assert_allclose(visual_twist_covariance(cov6, 0.0), [[4.0, 0, 0.5], [0, 5.0, 0], [0.5, 0, 3.0]])
+
+
+def test_the_team_refuses_an_unknown_odometry_source():
+    from mrslam_core.pipelines.team import TeamConfig
+
+    assert TeamConfig(odometry="fused").odometry == "fused"
+    with pytest.raises(ValueError, match="odometry must be one of"):
+        TeamConfig(odometry="gps")
