@@ -89,16 +89,8 @@ class ObstacleScanner:
         self._ds = ds
         hs, ws = rig.height // ds, rig.width // ds
         num = 16 * int(np.ceil(max(cfg.max_disparity / ds, 16) / 16))
-        block = 9
-        self._bm = cv2.StereoBM_create(numDisparities=num, blockSize=block)
+        self._bm = cv2.StereoBM_create(numDisparities=num, blockSize=9)
         self._bm.setMinDisparity(int(cfg.min_disparity // ds))
-        # StereoBM returns nothing in the left columns where the whole disparity range does not fit
-        # (num + min columns: 40 % of a 160-column image at 64 disparities), although a near
-        # obstacle there is wholly in the right image at its own disparity. The pair is padded on
-        # the left by mirroring so that every column gets a search, and a match is kept only when
-        # its right block lies inside the real right image (d <= u - block // 2, reduced pixels).
-        self._pad = num + max(int(cfg.min_disparity // ds), 0)
-        self._half = block // 2
         self._bm.setUniquenessRatio(15)
         self._bm.setTextureThreshold(10)
         self._bm.setSpeckleWindowSize(50)
@@ -109,7 +101,6 @@ class ObstacleScanner:
         self._u = ((cols - rig.cx) / rig.f)[None, :].repeat(hs, 0).ravel()
         self._v = ((rows - rig.cy) / rig.f)[:, None].repeat(ws, 1).ravel()
         self._size = (ws, hs)
-        self._col16 = 16 * np.arange(ws)[None, :].repeat(hs, 0).ravel()  # reduced column, 1/16 px
 
     def from_points(self, points_base: np.ndarray, stamp_ns: int) -> ObstacleScan:
         """Scan from already triangulated base_link points (P, 3) [m]."""
@@ -120,11 +111,8 @@ class ObstacleScanner:
         if self._ds > 1:
             left = cv2.resize(left, self._size, interpolation=cv2.INTER_AREA)
             right = cv2.resize(right, self._size, interpolation=cv2.INTER_AREA)
-        pad = self._pad
-        left = cv2.copyMakeBorder(left, 0, 0, pad, 0, cv2.BORDER_REFLECT_101)
-        right = cv2.copyMakeBorder(right, 0, 0, pad, 0, cv2.BORDER_REFLECT_101)
-        disp16 = np.ascontiguousarray(self._bm.compute(left, right)[:, pad:]).ravel()
-        ok = (disp16 > 0) & (disp16 <= self._col16 - 16 * self._half)
+        disp16 = self._bm.compute(left, right).ravel()
+        ok = disp16 > 0
         d = disp16[ok].astype(np.float32) * (self._ds / 16.0)  # full-resolution disparity [px]
         z = (self.rig.f * self.rig.baseline) / d
         keep = (z >= self.cfg.min_depth) & (z <= self.cfg.max_depth)

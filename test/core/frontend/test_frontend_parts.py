@@ -8,7 +8,7 @@ import pytest
 from mrslam_core.configio import ConfigError, from_dict, to_dict
 from mrslam_core.frontend import Frontend, FrontendConfig
 from mrslam_core.frontend.features import harris
-from mrslam_core.frontend.obstacles import ObstacleScanner, scan_from_points
+from mrslam_core.frontend.obstacles import scan_from_points
 from mrslam_core.frontend.spread import select_spread
 from mrslam_core.frontend.tracking import Tracker
 from mrslam_core.frontend.usurf import haar_responses, usurf
@@ -159,24 +159,6 @@ def test_scan_bins_obstacles_and_free_space():
     assert scan.free_ranges[0] == pytest.approx(np.hypot(1.0, 0.3))
     assert scan.free_ranges[2] == 0.0
     np.testing.assert_allclose(scan.points, [[2.0, 0.1], [3.0, 0.15]])
-
-
-def test_dense_scan_sees_a_wall_across_the_view_up_to_where_the_right_camera_ends(small_rig, textured):
-    # A fronto-parallel textured wall 2 m ahead of the camera (2.1 m ahead of base_link): 18 px of
-    # disparity, 9 in the reduced image. A left column u shows a wall point the right camera sees
-    # when u >= 9 + 4 (the block's half width): bearings up to atan(133.5 / 300) = 0.418 rad, bin 59.
-    cfg = FrontendConfig(max_disparity=128, dense_downsample=2, scan_bins=64)
-    scanner = ObstacleScanner(small_rig, cfg)
-    d = 18
-    tex = textured(240, 320 + d, 3)
-    scan = scanner.from_images(tex[:, :320].copy(), tex[:, d:].copy(), 0)
-    lo = scan.angle_min + scan.angle_increment * np.arange(64)
-    nearest = np.minimum(np.abs(lo), np.abs(lo + scan.angle_increment))
-    nearest[(lo < 0) & (lo + scan.angle_increment > 0)] = 0.0
-    seen = np.arange(2, 59)  # bins 0-1: StereoBM's right border
-    np.testing.assert_allclose(scan.ranges[seen], 2.1 / np.cos(nearest[seen]), rtol=0.05)
-    assert np.isinf(scan.ranges[60:]).all()  # wall points outside the right image: no return
-    assert np.all(np.abs(scan.points[:, 0] - 2.1) < 0.1)
 
 
 def test_config_roundtrip_and_validation():
