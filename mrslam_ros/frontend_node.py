@@ -200,12 +200,12 @@ class FrontendNode(Node):
 
     def publish_visual_odometry(self) -> None:
         """The frame's visual odometry on ``visual_odom`` (odom frame ``<robot>/visual_odom``)."""
-        from mrslam_core.pipelines.odometry import propagate_planar
+        from mrslam_core.pipelines.odometry import propagate_planar, visual_step_covariance
 
         vo = self.frontend.odometry
         dt = 0.0 if self._vo_stamp is None else (vo.stamp_ns - self._vo_stamp) * 1e-9
         prev = planar_from_matrix(vo.pose @ np.linalg.inv(vo.delta))
-        step_cov = vo.cov[np.ix_([3, 4, 2], [3, 4, 2])]  # x, y of the translation; the turn about z
+        step_cov = visual_step_covariance(vo.cov)
         self._vo_cov = propagate_planar(self._vo_cov, prev, planar_from_matrix(vo.delta), step_cov)
         self._vo_stamp = vo.stamp_ns
         self.vo_pub.publish(visual_odometry_msg(vo, self._vo_cov, dt, f"{self.cfg.robot}/visual_odom",

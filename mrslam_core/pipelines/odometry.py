@@ -47,12 +47,12 @@ def fuse_steps(wheel: np.ndarray, wheel_cov: np.ndarray, visual: np.ndarray, vis
     return step, 0.5 * (cov + cov.T)
 
 
-def visual_twist_covariance(cov6: np.ndarray, dt: float) -> np.ndarray:
-    """(3, 3) covariance of the planar body twist (vx, vy, ωz) [m/s, rad/s] of a frame's visual
-    motion, from its (6, 6) covariance over (δθ, δt) (:class:`~mrslam_core.frontend.frontend.VisualOdometry`)
-    over ``dt`` [s] (0: the step's own covariance, for a first frame, whose step is not used)."""
-    step = np.asarray(cov6, float)[np.ix_([3, 4, 2], [3, 4, 2])]  # x, y of the translation; the turn about z
-    return step / dt**2 if dt > 0 else step
+def visual_step_covariance(cov6: np.ndarray) -> np.ndarray:
+    """(3, 3) covariance of a frame's planar visual step (x [m], y [m], θ [rad]), from its (6, 6)
+    covariance over (δθ, δt) (:class:`~mrslam_core.frontend.frontend.VisualOdometry`): the x, y of
+    the translation and the turn about z. Over the frame interval dt it is the body twist's
+    covariance times dt² (what :meth:`OdometryFusion.add_visual` takes, divided by dt²)."""
+    return np.asarray(cov6, float)[np.ix_([3, 4, 2], [3, 4, 2])]
 
 
 class OdometryFusion:

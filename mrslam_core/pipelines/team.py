@@ -14,6 +14,7 @@ import sys
 import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import Literal
 
 import numpy as np
 
@@ -27,11 +28,11 @@ from mrslam_core.exploration.explorer import Explorer, State
 from mrslam_core.exploration.grid import OccupancyGrid, Scan
 from mrslam_core.frontend.camera import StereoRig
 from mrslam_core.frontend.config import FrontendConfig
-from mrslam_core.frontend.frontend import Frontend
+from mrslam_core.frontend.frontend import Frontend, VisualOdometry
 from mrslam_core.frontend.odometry import planar_motion
 from mrslam_core.geometry.se2 import between, planar_from_matrix
 from mrslam_core.pipelines.central import CentralConfig, CentralMapper, MapCheckConfig
-from mrslam_core.pipelines.odometry import SOURCES, OdometryFusion, visual_twist_covariance
+from mrslam_core.pipelines.odometry import SOURCES, OdometryFusion, visual_step_covariance
 from mrslam_core.sim.config import SimConfig
 from mrslam_core.sim.simulation import Simulation
 from mrslam_core.slam.config import FilterConfig
@@ -64,7 +65,7 @@ class TeamConfig:
     seconds: float = 120.0
     control_period: float = 0.2
     explore: bool = True
-    odometry: str = "wheel"
+    odometry: Literal["wheel", "visual", "fused"] = "wheel"
     sim: SimConfig = field(default_factory=SimConfig)
     frontend: FrontendConfig = field(default_factory=lambda: profile_section(FrontendConfig, TEAM_PROFILE, "frontend"))
     filter: FilterConfig = field(default_factory=lambda: profile_section(FilterConfig, TEAM_PROFILE, "filter"))
@@ -190,7 +191,7 @@ class _OdometryFeed:
         elif self.source == "fused":
             self._give(robot, self.fusion[robot].add_wheel(stamp_ns, pose))
 
-    def visual(self, robot: str, vo) -> None:
+    def visual(self, robot: str, vo: VisualOdometry | None) -> None:
         """The frontend's visual odometry after a frame (:class:`VisualOdometry`, None before one)."""
         if self.source == "wheel" or vo is None or self._vo_stamp.get(robot) == vo.stamp_ns:
             return
@@ -200,8 +201,8 @@ class _OdometryFeed:
         if self.source == "visual":
             self._give(robot, [(vo.stamp_ns, pose)])
             return
-        dt = 0.0 if prev is None else (vo.stamp_ns - prev) * 1e-9
-        self._give(robot, self.fusion[robot].add_visual(vo.stamp_ns, pose, visual_twist_covariance(vo.cov, dt)))
+        dt = 1.0 if prev is None else (vo.stamp_ns - prev) * 1e-9  # a first frame's step is not used
+        self._give(robot, self.fusion[robot].add_visual(vo.stamp_ns, pose, visual_step_covariance(vo.cov) / dt**2))
 
     def _give(self, robot: str, poses: list[tuple[int, np.ndarray]]) -> None:
         for stamp, pose in poses:

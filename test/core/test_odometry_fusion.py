@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mrslam_core.pipelines.odometry import OdometryFusion, fuse_steps, propagate_planar, visual_twist_covariance
+from mrslam_core.pipelines.odometry import OdometryFusion, fuse_steps, propagate_planar, visual_step_covariance
 from mrslam_core.slam.config import MotionConfig
 
 
@@ -61,12 +61,11 @@ def test_planar_covariance_propagation():
     np.testing.assert_allclose(np.diag(c), [0.02, 0.01, 0.03], atol=1e-15)
 
 
-def test_the_visual_twist_covariance_is_the_planar_part_of_the_step_over_the_interval():
-    # VisualOdometry.cov orders (δθx, δθy, δθz, δtx, δty, δtz); the planar twist is (vx, vy, ωz)
+def test_the_visual_step_covariance_is_the_planar_part_of_the_frame_motion():
+    # VisualOdometry.cov orders (δθx, δθy, δθz, δtx, δty, δtz); the planar step is (x, y, θ)
     cov6 = np.diag([1.0, 2.0, 3.0, 4.0, 5.0, 6.0])
     cov6[3, 2] = cov6[2, 3] = 0.5
-    np.testing.assert_allclose(visual_twist_covariance(cov6, 0.2), np.array([[4.0, 0, 0.5], [0, 5.0, 0], [0.5, 0, 3.0]]) / 0.04)
-    np.testing.assert_allclose(visual_twist_covariance(cov6, 0.0), [[4.0, 0, 0.5], [0, 5.0, 0], [0.5, 0, 3.0]])
+    np.testing.assert_allclose(visual_step_covariance(cov6), [[4.0, 0, 0.5], [0, 5.0, 0], [0.5, 0, 3.0]])
 
 
 def test_the_team_refuses_an_unknown_odometry_source():
