@@ -373,7 +373,7 @@ class SlamNode(Node):
         self._merges_logged = len(self.mapper.merges)
         for e in self.mapper.relocalizations[self._relocs_logged:]:
             if e["cause"] == "map_check":
-                self.get_logger().warning(f"{e['robot']} disagreed with the older map twice: moved by "
+                self.get_logger().warning(f"{e['robot']} contradicted the older map: the map check moved it by "
                                           f"{e['shift_m']:.2f} m, {math.degrees(e['turn_rad']):.1f} deg "
                                           f"({e['inliers']} inliers)")
             elif e["accepted"]:
