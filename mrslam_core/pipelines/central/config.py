@@ -33,7 +33,8 @@ class MapCheckConfig:
     particle when most moved it): left in the map, they drew the moved robot straight back
     (docs/results.md, "A late loss traced"). A robot whose wheels slipped while it saw nothing
     comes back several degrees off, and then maps a corridor mapped before as a new one, turned:
-    no association gate reaches landmarks 0.3 m away, while descriptors do. The same decision places a robot back from a gap (``relocalize_after``).
+    no association gate reaches landmarks 0.3 m away, while descriptors do. The same decision
+    places a robot back from a gap (``relocalize_after``).
 
     Attributes:
         every: seconds of a robot's sets between checks; 0: off (and 0 with a filter whose
