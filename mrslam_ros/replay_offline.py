@@ -52,16 +52,16 @@ def feed(bag: Path, mapper: CentralMapper, progress: bool = True,
     down = None if downtime is None else (int(downtime[0] * 1e9), int(downtime[1] * 1e9))
     skip_until = 0
 
-    from mrslam_core.pipelines.odometry import OdometryFusion
+    from mrslam_core.pipelines.odometry import OdometrySource
     from mrslam_ros.conversions import odometry_twist_covariance
 
     source = getattr(mapper.cfg, "source", lambda r: "wheel")  # the central node's odometry sources
-    fusion = {r: OdometryFusion(mapper.cfg.wheel_motion) for r in mapper.robots if source(r) == "fused"}
+    odometry = {r: OdometrySource(source(r), mapper.cfg.wheel_motion) for r in mapper.robots}
     topics = {}
     for r in mapper.robots:
-        if source(r) in ("wheel", "fused"):
+        if odometry[r].uses_wheel:
             topics[f"/{r}/odom"] = (r, "odom")
-        if source(r) in ("visual", "fused"):
+        if odometry[r].uses_visual:
             topics[f"/{r}/visual_odom"] = (r, "visual_odom")
         topics[f"/{r}/observations"] = (r, "obs")
     info = bag_info(bag)
@@ -89,11 +89,8 @@ def feed(bag: Path, mapper: CentralMapper, progress: bool = True,
         if stamp < skip_until:
             continue
         if kind in ("odom", "visual_odom"):
-            if robot in fusion:
-                f = fusion[robot]
-                poses = f.add_wheel(stamp, pose) if kind == "odom" else f.add_visual(stamp, pose, twist_cov)
-            else:
-                poses = [(stamp, pose)]
+            src = odometry[robot]
+            poses = src.wheel(stamp, pose) if kind == "odom" else src.visual(stamp, pose, twist_cov)
             for t, p in poses:
                 mapper.add_odometry(robot, t, p)
             kind = "odom"

@@ -60,7 +60,7 @@ from mrslam_ros.conversions import (
     transform_msg,
 )
 from mrslam_ros.diagnostics import Diagnostics
-from mrslam_core.pipelines.odometry import OdometryFusion
+from mrslam_core.pipelines.odometry import OdometrySource
 from mrslam_core.slam.config import MotionConfig
 from mrslam_ros.params import declare_config, read_config
 from mrslam_ros.spin import drop_untakeable, run_node
@@ -164,12 +164,12 @@ class SlamNode(Node):
         self.cloud_pub = self.create_publisher(PointCloud2, "/slam/landmarks", 1)
         self.marker_pub = self.create_publisher(MarkerArray, "/slam/landmark_markers", 1)
         self.particle_pub = self.create_publisher(PoseArray, "/slam/particles", 1)
-        self._fusion = {r: OdometryFusion(self.cfg.wheel_motion) for r in robots if self.cfg.source(r) == "fused"}
+        self._odometry = {r: OdometrySource(self.cfg.source(r), self.cfg.wheel_motion) for r in robots}
         odometry_specs = []
         for r in robots:
-            if self.cfg.source(r) in ("wheel", "fused"):
+            if self._odometry[r].uses_wheel:
                 odometry_specs.append((Odometry, f"/{r}/odom", partial(self.on_odom, r), 100))
-            if self.cfg.source(r) in ("visual", "fused"):
+            if self._odometry[r].uses_visual:
                 odometry_specs.append((Odometry, f"/{r}/visual_odom", partial(self.on_visual_odom, r), 100))
         topics = [spec[1] for spec in odometry_specs] + [f"/{r}/observations" for r in robots]
         self._wait_for_publishers(topics, self.cfg.discovery_wait)  # learn who keeps a history first
@@ -228,10 +228,7 @@ class SlamNode(Node):
         except ConversionError as exc:
             self.diag.count("bad_odometry", f"{robot}: {exc}")
             return
-        if robot in self._fusion:
-            self._add_odometry(robot, self._fusion[robot].add_wheel(stamp, pose))
-        else:
-            self._add_odometry(robot, [(stamp, pose)])
+        self._add_odometry(robot, self._odometry[robot].wheel(stamp, pose))
 
     def on_visual_odom(self, robot: str, msg: Odometry) -> None:
         """The frontend's visual odometry: the robot's odometry, or the visual half of its fused one."""
@@ -241,11 +238,10 @@ class SlamNode(Node):
         except ConversionError as exc:
             self.diag.count("bad_odometry", f"{robot}: {exc}")
             return
-        if robot in self._fusion:
-            self._add_odometry(robot, self._fusion[robot].add_visual(stamp, pose, twist_cov))
-            self.diag.mirror({"odometry_not_fused": self._fusion[robot].dropped}, detail=robot)
-        else:
-            self._add_odometry(robot, [(stamp, pose)])
+        source = self._odometry[robot]
+        self._add_odometry(robot, source.visual(stamp, pose, twist_cov))
+        if source.fusion is not None:
+            self.diag.mirror({"odometry_not_fused": source.dropped}, detail=robot)
 
     def _add_odometry(self, robot: str, poses: list[tuple[int, np.ndarray]]) -> None:
         if not poses:

@@ -1,5 +1,8 @@
 """A robot's odometry input to the central mapper: wheel, visual, or both fused.
 
+:class:`OdometrySource` routes one robot's wheel and visual odometry to the poses the mapper
+takes, by its configured source; the central node, the offline replay and the in-process team
+all use it.
 ``wheel`` and ``visual`` pass one source's planar poses through. ``fused`` combines them step by
 step: at each visual odometry pose (the frontend's frame stamps), the visual step since the
 previous one and the wheel odometry's step over the same interval (interpolated from its pose
@@ -121,6 +124,47 @@ class OdometryFusion:
             self._last = (stamp, vpose, fused)
             out.append((stamp, fused))
         return out
+
+
+class OdometrySource:
+    """One robot's odometry for the central mapper, from its configured source.
+
+    Args:
+        source: ``wheel`` (the wheel odometry's poses pass through), ``visual`` (the visual
+            odometry's do) or ``fused`` (both, step by step: :class:`OdometryFusion`).
+        wheel_motion: the wheel odometry's noise model (used by ``fused`` only).
+
+    Attributes:
+        uses_wheel, uses_visual: which streams this source reads (the others are ignored).
+        fusion: the :class:`OdometryFusion` of a ``fused`` source, else None.
+    """
+
+    def __init__(self, source: str, wheel_motion: MotionConfig):
+        if source not in SOURCES:
+            raise ValueError(f"odometry source must be one of {SOURCES}, not {source!r}")
+        self.source = source
+        self.uses_wheel = source in ("wheel", "fused")
+        self.uses_visual = source in ("visual", "fused")
+        self.fusion = OdometryFusion(wheel_motion) if source == "fused" else None
+
+    @property
+    def dropped(self) -> int:
+        """Visual poses a ``fused`` source could not fuse (0 for the others)."""
+        return 0 if self.fusion is None else self.fusion.dropped
+
+    def wheel(self, stamp_ns: int, pose: np.ndarray) -> list[tuple[int, np.ndarray]]:
+        """A wheel odometry pose (3,) [m, m, rad, odom frame]; returns the odometry poses (stamp,
+        pose (3,)) for the mapper it completes, oldest first."""
+        if self.fusion is not None:
+            return self.fusion.add_wheel(stamp_ns, pose)
+        return [(int(stamp_ns), np.asarray(pose, float))] if self.uses_wheel else []
+
+    def visual(self, stamp_ns: int, pose: np.ndarray, twist_cov: np.ndarray) -> list[tuple[int, np.ndarray]]:
+        """A visual odometry pose (3,) with its body twist's (3, 3) covariance (vx, vy, ωz); returns
+        the odometry poses for the mapper it completes, oldest first."""
+        if self.fusion is not None:
+            return self.fusion.add_visual(stamp_ns, pose, twist_cov)
+        return [(int(stamp_ns), np.asarray(pose, float))] if self.uses_visual else []
 
 
 def propagate_planar(cov: np.ndarray, pose: np.ndarray, step: np.ndarray, step_cov: np.ndarray) -> np.ndarray:

@@ -32,7 +32,7 @@ from mrslam_core.frontend.frontend import Frontend, VisualOdometry
 from mrslam_core.frontend.odometry import planar_motion
 from mrslam_core.geometry.se2 import between, planar_from_matrix
 from mrslam_core.pipelines.central import CentralConfig, CentralMapper, MapCheckConfig
-from mrslam_core.pipelines.odometry import SOURCES, OdometryFusion, visual_step_covariance
+from mrslam_core.pipelines.odometry import SOURCES, OdometrySource, visual_step_covariance
 from mrslam_core.sim.config import SimConfig
 from mrslam_core.sim.simulation import Simulation
 from mrslam_core.slam.config import FilterConfig
@@ -55,8 +55,9 @@ class TeamConfig:
             demo's central node's).
         odometry: what the central mapper takes as each robot's odometry: ``wheel`` (the
             simulator's), ``visual`` (the frontend's visual odometry) or ``fused`` (both, step by
-            step with their information matrices, :class:`OdometryFusion`, the wheels' noise
-            model being ``filter.motion``). The frontends' search windows follow the wheels in all.
+            step with their information matrices,
+            :class:`~mrslam_core.pipelines.odometry.OdometryFusion`, the wheels' noise model
+            being ``filter.motion``). The frontends' search windows follow the wheels in all.
         frontend, filter, exploration, control: by default the simulated team profile
             (config/sim_team.yaml).
     """
@@ -179,30 +180,24 @@ class _OdometryFeed:
     """
 
     def __init__(self, cfg: TeamConfig, mapper: CentralMapper, names: list[str]):
-        self.source = cfg.odometry
         self.mapper = mapper
-        self.fusion = {n: OdometryFusion(cfg.filter.motion) for n in names} if self.source == "fused" else {}
+        self.sources = {n: OdometrySource(cfg.odometry, cfg.filter.motion) for n in names}
         self.first: dict[str, np.ndarray] = {}
         self._vo_stamp: dict[str, int] = {}
 
     def wheel(self, robot: str, stamp_ns: int, pose: np.ndarray) -> None:
-        if self.source == "wheel":
-            self._give(robot, [(stamp_ns, pose)])
-        elif self.source == "fused":
-            self._give(robot, self.fusion[robot].add_wheel(stamp_ns, pose))
+        self._give(robot, self.sources[robot].wheel(stamp_ns, pose))
 
     def visual(self, robot: str, vo: VisualOdometry | None) -> None:
         """The frontend's visual odometry after a frame (:class:`VisualOdometry`, None before one)."""
-        if self.source == "wheel" or vo is None or self._vo_stamp.get(robot) == vo.stamp_ns:
+        source = self.sources[robot]
+        if not source.uses_visual or vo is None or self._vo_stamp.get(robot) == vo.stamp_ns:
             return
         prev = self._vo_stamp.get(robot)
         self._vo_stamp[robot] = vo.stamp_ns
-        pose = planar_from_matrix(vo.pose)
-        if self.source == "visual":
-            self._give(robot, [(vo.stamp_ns, pose)])
-            return
         dt = 1.0 if prev is None else (vo.stamp_ns - prev) * 1e-9  # a first frame's step is not used
-        self._give(robot, self.fusion[robot].add_visual(vo.stamp_ns, pose, visual_step_covariance(vo.cov) / dt**2))
+        twist_cov = visual_step_covariance(vo.cov) / dt**2
+        self._give(robot, source.visual(vo.stamp_ns, planar_from_matrix(vo.pose), twist_cov))
 
     def _give(self, robot: str, poses: list[tuple[int, np.ndarray]]) -> None:
         for stamp, pose in poses:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mrslam_core.pipelines.odometry import OdometryFusion, fuse_steps, propagate_planar, visual_step_covariance
+from mrslam_core.pipelines.odometry import OdometryFusion, OdometrySource, fuse_steps, propagate_planar, visual_step_covariance
 from mrslam_core.slam.config import MotionConfig
 
 
@@ -48,6 +48,23 @@ def test_visual_poses_wait_for_the_wheels_to_reach_their_stamp():
     out = fusion.add_wheel(200, np.array([0.2, 0.0, 0.0]))
     assert [s for s, _ in out] == [100]
     np.testing.assert_allclose(out[0][1], [0.1, 0.0, 0.0])  # the wheel pose interpolated at 100 ns
+
+
+def test_each_source_passes_its_own_stream_and_ignores_the_other():
+    pose, cov = np.array([1.0, 2.0, 0.5]), np.eye(3)
+    wheel = OdometrySource("wheel", MotionConfig())
+    assert (wheel.uses_wheel, wheel.uses_visual, wheel.fusion) == (True, False, None)
+    (stamp, out), = wheel.wheel(10, pose)
+    assert stamp == 10 and np.array_equal(out, pose)
+    assert wheel.visual(20, pose, cov) == [] and wheel.dropped == 0
+    visual = OdometrySource("visual", MotionConfig())
+    assert visual.wheel(10, pose) == [] and [s for s, _ in visual.visual(20, pose, cov)] == [20]
+    fused = OdometrySource("fused", MotionConfig())
+    assert fused.uses_wheel and fused.uses_visual and isinstance(fused.fusion, OdometryFusion)
+    assert fused.wheel(0, np.zeros(3)) == [] and fused.visual(100, pose, cov) == []  # wheels at 0 ns
+    assert [s for s, _ in fused.wheel(200, np.array([0.2, 0.0, 0.0]))] == [100]
+    with pytest.raises(ValueError, match="odometry source must be one of"):
+        OdometrySource("gps", MotionConfig())
 
 
 def test_planar_covariance_propagation():
