@@ -3,6 +3,7 @@
 :class:`OdometrySource` routes one robot's wheel and visual odometry to the poses the mapper
 takes, by its configured source; the central node, the offline replay and the in-process team
 all use it.
+
 ``wheel`` and ``visual`` pass one source's planar poses through. ``fused`` combines them step by
 step: at each visual odometry pose (the frontend's frame stamps), the visual step since the
 previous one and the wheel odometry's step over the same interval (interpolated from its pose
@@ -135,6 +136,7 @@ class OdometrySource:
         wheel_motion: the wheel odometry's noise model (used by ``fused`` only).
 
     Attributes:
+        source: the source's name.
         uses_wheel, uses_visual: which streams this source reads (the others are ignored).
         fusion: the :class:`OdometryFusion` of a ``fused`` source, else None.
     """
