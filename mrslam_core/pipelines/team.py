@@ -55,9 +55,8 @@ class TeamConfig:
             demo's central node's).
         odometry: what the central mapper takes as each robot's odometry: ``wheel`` (the
             simulator's), ``visual`` (the frontend's visual odometry) or ``fused`` (both, step by
-            step with their information matrices,
-            :class:`~mrslam_core.pipelines.odometry.OdometryFusion`, the wheels' noise model
-            being ``filter.motion``). The frontends' search windows follow the wheels in all.
+            step with their information matrices, :class:`OdometryFusion`, the wheels' noise
+            model being ``filter.motion``). The frontends' search windows follow the wheels in all.
         frontend, filter, exploration, control: by default the simulated team profile
             (config/sim_team.yaml).
     """
