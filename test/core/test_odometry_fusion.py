@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mrslam_core.pipelines.odometry import OdometryFusion, OdometrySource, fuse_steps, propagate_planar, visual_step_covariance
+from mrslam_core.pipelines.odometry import (OdometryFusion, OdometrySource, fuse_steps, propagate_planar,
+                                            visual_step_covariance)
 from mrslam_core.slam.config import MotionConfig
 
 
