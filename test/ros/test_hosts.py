@@ -52,6 +52,7 @@ def test_a_team_maps_across_two_network_namespaces(hosts, tmp_path):
     assert "10.231.7.1" in addrs and "10.231.7.2" not in addrs
     robots_side = ["ip", "netns", "exec", ROBOTS]
     cfg = {"node_prefix": {"sim": robots_side, "robot1/frontend": robots_side, "robot2/frontend": robots_side},
+           "real_time_factor": 0.8,  # two robots keep up at 0.8 on 2 cores (config/demo_faults.yaml)
            "team": {"robots": 2, "seconds": 20.0, "sim": {"world": "small"}}}
     (tmp_path / "hosts.yaml").write_text(yaml.safe_dump(cfg))
     env = dict(os.environ, FASTDDS_BUILTIN_TRANSPORTS="UDPv4", ROS_AUTOMATIC_DISCOVERY_RANGE="SUBNET")
