@@ -1,13 +1,15 @@
 """``mrslam experiment fusion_mrclam DIR``: MR.CLAM with robots whose start pose is unknown (issue 8).
 
-Robot 1 (the robots in ``known``) starts the central filter at its Vicon start pose; every other
-robot runs its own filter (K = 1) from its own origin, knowing nothing of the others. A robot joins
-the central filter particle by particle (004 section 5) either by a rendezvous — in a step in which
-it and a robot of the central filter measure each other, which gives its pose in the common frame
-directly (:mod:`mrslam_core.fusion.rendezvous`), once a second such sighting agrees — or, every ``try_every`` seconds, by aligning its
-best map with the central best map (barcode descriptors, RANSAC, at least ``min_inliers``
-inliers). From then on it is one more robot of the joint filter (its sightings of the other merged
-robots and theirs of it are scored from then on).
+The log goes through the central mapper as in ``mrslam mrclam``
+(:func:`mrslam_core.pipelines.mrclam.run`), with every robot but the ``known`` ones in
+``unknown_start``: robot 1 starts the central filter at its Vicon start pose, every other robot is
+mapped by its own local filter from its own origin until its :class:`~mrslam_core.pipelines.central.
+lifecycle.Lifecycle` joins it, particle by particle (004 section 5), either by a rendezvous — it and
+a robot of the central filter read each other within ``fusion.sighting_pair_window``, which gives
+its pose in the common frame directly (:mod:`mrslam_core.fusion.rendezvous`), once a second such
+sighting or an alignment agrees — or, every ``merge_every`` of its sets, by aligning its best map
+with the central best map (barcode descriptors, the χ² tests of
+:mod:`mrslam_core.fusion.acceptance`). From then on it is one more robot of the joint filter.
 
 Reported per merged robot: the merge time and how, the transform's error against the robot's true
 start pose, and its ATE against Vicon from the merge to the end, next to the ATE of the known-start
@@ -18,25 +20,19 @@ unaligned and after one SE(2) transform fitted to the whole team.
 from __future__ import annotations
 
 import argparse
-import sys
 import time
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from mrslam_core.datasets.mrclam import MrclamDataset, OdometryIntegrator
+from mrslam_core.datasets.mrclam import MrclamDataset
 from mrslam_core.evaluation.metrics import ate_rmse
 from mrslam_core.experiments._output import write_tables
 from mrslam_core.fusion.alignment import alignment_error, apply_transform, rigid_transform_2d
 from mrslam_core.fusion.config import FusionConfig
-from mrslam_core.fusion.gauge import hold_gauge
-from mrslam_core.fusion.join import try_join
-from mrslam_core.fusion.rendezvous import RendezvousGate, join_rendezvous, sighting_transform
-from mrslam_core.pipelines.mrclam import MrclamConfig, _one_hot, measurement_frames
+from mrslam_core.pipelines.mrclam import MrclamConfig, robot_number
 from mrslam_core.pipelines.mrclam import run as run_known_start
 from mrslam_core.slam.config import FilterConfig
-from mrslam_core.slam.filter import MultiRobotFastSLAM, RobotUpdate
-from mrslam_core.types import ObservationSet, RobotSighting
 
 
 def _mrclam_fusion() -> FusionConfig:
@@ -71,187 +67,60 @@ class MrclamFusionConfig:
     """The unknown-start MR.CLAM run.
 
     Attributes:
-        mrclam: the filter run, by default the MR.CLAM defaults (the known-start run it is
-            compared with uses the same).
-        fusion: alignment thresholds.
+        mrclam: the mapper and filter, by default the MR.CLAM profile (the known-start run it is
+            compared with uses the same); its ``merge_every`` sets how often a local map is
+            aligned.
+        fusion: alignment and join tests of the unknown-start run.
         known: robots whose start pose is known (they start the central filter).
-        try_every: seconds between alignment attempts of each unmerged robot.
-        hold_gauge: while the central map is empty, hold the known robots' poses at their
-            weighted mean (:func:`mrslam_core.fusion.gauge.hold_gauge`), so the common frame is
-            their dead reckoning rather than one random draw of its noise.
-        rendezvous: also merge a robot once it and a robot of the central filter measure each
-            other in the same step and a second such sighting within
-            ``fusion.evidence_window`` agrees (:class:`~mrslam_core.fusion.rendezvous.RendezvousGate`),
-            without waiting for the maps to overlap.
+        rendezvous: also join a robot on mutual sightings (``CentralConfig.rendezvous``), and
+            hold a weak alignment until a sighting agrees.
     """
 
     mrclam: MrclamConfig = field(default_factory=MrclamConfig)
     fusion: FusionConfig = field(default_factory=_mrclam_fusion)
     known: tuple[int, ...] = (1,)
-    try_every: float = 5.0
-    hold_gauge: bool = True
     rendezvous: bool = True
+
+    def unknown_start_config(self) -> MrclamConfig:
+        """The mapper's config of the unknown-start run."""
+        mc = self.mrclam
+        if not any(robot_number(r) in self.known for r in mc.robots):
+            raise ValueError("at least one robot must have a known start pose")
+        return replace(mc, unknown_start=tuple(r for r in mc.robots if robot_number(r) not in self.known),
+                       rendezvous=self.rendezvous, fusion=self.fusion)
 
 
 def run_unknown_start(ds: MrclamDataset, cfg: MrclamFusionConfig, progress: bool = False) -> dict:
-    """Central filter for the known robots, local filters for the others, merged on alignment.
+    """The log through the central mapper with the robots not in ``cfg.known`` in ``unknown_start``.
 
     Returns:
         {"times": (S+1,) [s], "est": {robot: (S+1, 3) map-frame estimate, NaN before merging},
-         "gt": {robot: (S+1, 3)}, "merged": {robot: {"step", "time_s", "transform", "inliers",
-         "rmse_m", "start_error_m", "start_error_deg", "fused", "added"}}, "attempts": {robot:
-         [reasons]}, "update_ms": (S,)}
+         "gt": {robot: (S+1, 3)}, "merged": {robot: {"step", "time_s", "via", "transform",
+         "inliers", "rmse_m", "start_error_m", "start_error_deg", "fused", "added", "dropped",
+         "join_pose_error_m"}}, "attempts": {robot: [reasons]}, "update_ms": (S,)}
     """
-    mc = cfg.mrclam
-    robots = mc.numbers
-    ds = ds.calibrated(mc.calibration)
-    t0, t1 = ds.time_span()
-    if mc.duration is not None:
-        t1 = min(t1, t0 + mc.duration)
-    nsteps = int(np.floor((t1 - t0) / mc.team_step))
-    times = t0 + mc.team_step * np.arange(nsteps + 1)
-    name = {i: f"robot{i}" for i in robots}
-    starts = {i: ds.groundtruth(i, np.array([t0]))[0] for i in robots}
-    odo = {i: OdometryIntegrator(ds.robots[i].odometry, mc.odometry_delay) for i in robots}
-    lm_cov = np.diag([mc.sigma_range**2, mc.sigma_bearing**2])
-    rr_cov = np.diag([mc.sigma_sighting_range**2, mc.sigma_sighting_bearing**2])
-
-    per_step: dict[int, dict[int, np.ndarray]] = {}
-    for i in robots:  # the known-start pipeline's frames, by window k: (t0 + (k−1)·period, t0 + k·period]
-        frames = measurement_frames(ds, i, t0, times[-1])
-        m = np.concatenate(frames) if frames else np.zeros((0, 4))
-        k = np.maximum(np.ceil((m[:, 0] - t0) / mc.team_step - 1e-9), 1).astype(np.int64)
-        splits = np.flatnonzero(np.diff(k)) + 1
-        per_step[i] = {int(kk[0]): mm for kk, mm in zip(np.split(k, splits), np.split(m, splits)) if len(kk)}
-
-    known = [i for i in robots if i in cfg.known]
-    if not known:
-        raise ValueError("at least one robot must have a known start pose")
-    central = MultiRobotFastSLAM(mc.filter, [name[i] for i in known], np.array([starts[i] for i in known]))
-    local = {
-        i: MultiRobotFastSLAM(replace(mc.filter, seed=mc.filter.seed + i), [name[i]], np.zeros((1, 3)))
-        for i in robots if i not in cfg.known
-    }
-    in_central = list(known)
-    est = {name[i]: np.full((nsteps + 1, 3), np.nan) for i in robots}
-    for i in known:
-        est[name[i]][0] = starts[i]
+    res = run_known_start(ds, cfg.unknown_start_config(), progress)
+    traj = res["trajectories"]
+    any_robot = next(iter(traj.values()))
+    times = any_robot["t"]
+    t0 = times[0]
     merged: dict[str, dict] = {}
-    attempts: dict[str, list[str]] = {name[i]: [] for i in local}
-    every = max(round(cfg.try_every / mc.team_step), 1)
-    gate = RendezvousGate.from_config(cfg.fusion)  # one for sightings and alignments: they confirm each other
-
-    def updates_for(i: int, k: int, group: list[int]) -> list[RobotUpdate]:
-        m = per_step[i].get(k, np.zeros((0, 4)))
-        out = []
-        t_prev = times[k - 1]
-        for t_meas in [*np.unique(m[:, 0]), None]:
-            if t_meas is None:
-                if t_prev >= times[k]:
-                    break
-                frame, tb = m[:0], times[k]
-            else:
-                frame, tb = m[m[:, 0] == t_meas], t_meas
-            stamp = round((tb - t0) * 1e9)
-            lm = frame[frame[:, 1] > ds.num_robots]
-            obs = None
-            if len(lm):
-                obs = ObservationSet(name[i], stamp, lm[:, 2:4], np.broadcast_to(lm_cov, (len(lm), 2, 2)), _one_hot(lm[:, 1]))
-            sightings = []
-            if mc.use_sightings and len(group) > 1:
-                for row in frame[frame[:, 1] <= ds.num_robots]:
-                    if int(row[1]) in group and int(row[1]) != i:
-                        sightings.append(RobotSighting(name[i], name[int(row[1])], row[2:4], rr_cov))
-            out.append(RobotUpdate(name[i], stamp, odo[i].delta(t_prev, tb), obs, sightings))
-            t_prev = tb
-        return out
-
-    def record(i: int, k: int, transform: np.ndarray, joined, via: str, inliers: int, matches: int, rmse: float) -> None:
-        """Robot i joined the central filter at step k: log it and move it out of ``local``."""
-        dt, dth = alignment_error(transform, starts[i])
-        # the joined robot's pose: weighted mean against Vicon now, and the particles' own spread
-        w = np.exp(central.log_w - np.logaddexp.reduce(central.log_w))
-        p = central.poses[:, central.index[name[i]]]
-        mean = central.estimate().mean[central.index[name[i]], :2]
-        sd = float(np.sqrt(w @ ((p[:, :2] - mean) ** 2).sum(1)))
-        truth = ds.groundtruth(i, times[k:k + 1])[0]
-        merged[name[i]] = {
-            "step": k, "time_s": float(times[k] - t0), "transform": np.asarray(transform).tolist(), "via": via,
-            "inliers": inliers, "matches": matches, "rmse_m": rmse,
-            "start_error_m": dt, "start_error_deg": float(np.degrees(dth)),
-            "fused": joined.fused, "added": joined.added, "dropped": joined.dropped,
-            "join_pose_error_m": float(np.linalg.norm(mean - truth[:2])), "join_pose_sd_m": sd,
-            "local_ancestors": int(np.unique(joined.ancestors[:, 1]).size),
-        }
-        del local[i]
-        in_central.append(i)
-        if progress:
-            print(f"  merged {name[i]} at {times[k] - t0:.1f} s by {via} ({inliers} inliers), "
-                  f"start pose error {dt:.3f} m {np.degrees(dth):.2f}°; joined pose "
-                  f"{merged[name[i]]['join_pose_error_m']:.3f} m off, particle spread {sd:.3f} m "
-                  f"({merged[name[i]]['local_ancestors']} local ancestors)", file=sys.stderr, flush=True)
-
-    step_ms = []
-    report_every = max(nsteps // 10, 1)
-    for k in range(1, nsteps + 1):
-        tic = time.perf_counter()
-        ups = [u for i in in_central for u in updates_for(i, k, in_central)]
-        if cfg.hold_gauge:
-            hold_gauge(central, [name[i] for i in known])
-        central.step(ups)
-        for i, slam in local.items():
-            slam.step(updates_for(i, k, [i]))
-        if cfg.rendezvous:
-            for i in list(local):
-                meet = mutual_sighting(per_step, k, i, in_central)
-                if meet is None:
-                    continue
-                j, z_ij, z_ji = meet
-                rv = gate.offer_sighting(name[i], float(times[k] - t0),
-                                         sighting_transform(central, local[i], name[j], z_ij, z_ji, rr_cov, rr_cov))
-                if rv is None:  # held until a second sighting agrees, or refused
-                    attempts[name[i]].append(gate.log[name[i]][-1])
-                    continue
-                joined = join_rendezvous(central, local[i], name[i], rv, cfg.fusion)
-                record(i, k, rv.transform, joined, f"rendezvous with {name[j]}", int(joined.fused), int(joined.fused), float("nan"))
-        if k % every == 0:
-            for i in list(local):
-                al, joined = try_join(central, local[i], cfg.fusion, name[i], gate, float(times[k] - t0))
-                if joined is None:
-                    attempts[name[i]].append(f"{times[k] - t0:.1f} s: {al.reason}")
-                    continue
-                record(i, k, al.transform, joined, "map alignment", int(al.inliers.size), len(al.matches), al.rmse)
-        step_ms.append((time.perf_counter() - tic) * 1e3)
-        poses = central.estimate().mean
-        for j, rname in enumerate(central.robots):
-            est[rname][k] = poses[j]
-        if progress and k % report_every == 0:
-            print(f"  step {k}/{nsteps} ({100 * k // nsteps}%)", file=sys.stderr, flush=True)
-    return {
-        "times": times, "est": est, "gt": {name[i]: ds.groundtruth(i, times) for i in robots},
-        "merged": merged, "attempts": attempts, "update_ms": np.array(step_ms),
-    }
-
-
-def mutual_sighting(
-    per_step: dict[int, dict[int, np.ndarray]], k: int, i: int, group: list[int]
-) -> tuple[int, np.ndarray, np.ndarray] | None:
-    """A robot j of ``group`` that robot i measured in step k and that measured i in the same step:
-    (j, i's last (range, bearing) of j, j's last of i), or None."""
-    mine = per_step[i].get(k)
-    if mine is None:
-        return None
-    for j in group:
-        seen = mine[mine[:, 1] == j]
-        if not len(seen):
+    attempts: dict[str, list[str]] = {r: [] for r in cfg.unknown_start_config().unknown_start}
+    for m in res["merges"]:
+        r = m["robot"]
+        if not m["accepted"]:
+            attempts[r].append(f"{m['stamp_ns'] * 1e-9:.1f} s: {m['via']}: {m['reason']}")
             continue
-        theirs = per_step[j].get(k)
-        if theirs is None:
-            continue
-        back = theirs[theirs[:, 1] == i]
-        if len(back):
-            return j, seen[-1, 2:4].copy(), back[-1, 2:4].copy()
-    return None
+        est, gt = traj[r]["est"], traj[r]["gt"]
+        k = int(np.flatnonzero(np.isfinite(est[:, 0]))[0])
+        dt, dth = alignment_error(np.asarray(m["transform"]), gt[0])
+        merged[r] = {"step": k, "time_s": float(times[k] - t0), "via": "map alignment" if m["via"] == "alignment"
+                     else m["via"], "transform": m["transform"], "inliers": m["inliers"], "rmse_m": m["rmse_m"],
+                     "start_error_m": dt, "start_error_deg": float(np.degrees(dth)), "fused": m["fused"],
+                     "added": m["added"], "dropped": m["dropped"],
+                     "join_pose_error_m": float(np.linalg.norm(est[k, :2] - gt[k, :2]))}
+    return {"times": times, "est": {r: v["est"] for r, v in traj.items()}, "gt": {r: v["gt"] for r, v in traj.items()},
+            "merged": merged, "attempts": attempts, "update_ms": res["update_ms"]}
 
 
 def gauge_free(
@@ -339,14 +208,13 @@ def main(argv: list[str]) -> int:
     ap.add_argument("--seeds", type=int, default=1)
     ap.add_argument("--particles", type=int)
     ap.add_argument("--duration", type=float, help="seconds to process from the start")
-    ap.add_argument("--try-every", type=float, help="seconds between alignment attempts")
+    ap.add_argument("--merge-every", type=int, help="sets of an unmerged robot between alignment attempts")
     ap.add_argument("--pair-likelihood", action="store_true", help="weight joined pairs by their landmarks' agreement")
     ap.add_argument("--global-transform", action="store_true",
                     help="join every particle with the best maps' transform (no per-pair refit)")
     ap.add_argument("--filter", choices=["current", "pinned"], default="current",
                     help="MR.CLAM filter: current defaults, or the earlier pinned one (pinned_filter)")
     ap.add_argument("--no-rendezvous", action="store_true", help="merge by map alignment only")
-    ap.add_argument("--no-hold-gauge", action="store_true", help="sample the known robots' noise before the first landmark")
     ap.add_argument("--join-uncertainty", choices=["drift", "proposal"],
                     help="where a map join puts the alignment's covariance (FusionConfig.transform_uncertainty)")
     ap.add_argument("--single-sighting", action="store_true",
@@ -360,7 +228,7 @@ def main(argv: list[str]) -> int:
     ds = MrclamDataset(args.folder)
     if args.start:
         ds = LaterStart(ds, args.start)
-    base = MrclamFusionConfig(rendezvous=not args.no_rendezvous, hold_gauge=not args.no_hold_gauge)
+    base = MrclamFusionConfig(rendezvous=not args.no_rendezvous)
     if args.filter == "pinned":
         base = replace(base, mrclam=replace(base.mrclam, filter=pinned_filter()))
     if args.global_transform:
@@ -380,9 +248,9 @@ def main(argv: list[str]) -> int:
         mc = replace(mc, filter=replace(mc.filter, num_particles=args.particles))
     if args.duration:
         mc = replace(mc, duration=args.duration)
+    if args.merge_every:
+        mc = replace(mc, merge_every=args.merge_every)
     base = replace(base, mrclam=mc)
-    if args.try_every:
-        base = replace(base, try_every=args.try_every)
     runs = []
     for seed in range(args.seeds):
         cfg = replace(base, mrclam=replace(mc, filter=replace(mc.filter, seed=seed)))
@@ -405,7 +273,7 @@ def main(argv: list[str]) -> int:
     names = list(runs[0]["robots"])
     lines = [
         (f"MR.CLAM {args.folder}, robots {list(base.known)} known start, others unknown; filter {args.filter}, "
-         f"rendezvous {'on' if base.rendezvous else 'off'}, hold gauge {'on' if base.hold_gauge else 'off'}; "
+         f"rendezvous {'on' if base.rendezvous else 'off'}; "
          f"M = {mc.filter.num_particles}, {args.seeds} seed(s); ATE RMSE [m] from the merge to the end, "
          "both runs over the same window. Unaligned = map frame as estimated (the bound applies to it); "
          "team-aligned = after ONE SE(2) transform fitted to all robots' post-merge positions jointly, per run"),

@@ -88,6 +88,8 @@ class FusionConfig:
             particle, and moves each local particle's map with its own pose
             (:func:`~mrslam_core.fusion.rendezvous.anchored_transforms`); False draws one
             transform per particle from N(T, Cov T) around the weighted means.
+        sighting_pair_window: two robots' readings of each other at most this far apart are one
+            mutual sighting (their motion in between is not modelled; MR.CLAM's filter step) [s].
     """
 
     descriptor_threshold: float = 0.5
@@ -115,6 +117,7 @@ class FusionConfig:
     join_confidence: float = 0.99
     evidence_window: float | None = 10.0
     rendezvous_anchor: bool = False
+    sighting_pair_window: float = 0.2
 
     def __post_init__(self) -> None:
         if self.ransac_iterations < 1 or self.refine_iterations < 0:
@@ -137,6 +140,8 @@ class FusionConfig:
             raise ValueError("min_pair_spread must be >= 0 or None")
         if self.evidence_window is not None and self.evidence_window <= 0:
             raise ValueError("evidence_window must be > 0 or None")
+        if not self.sighting_pair_window >= 0:
+            raise ValueError("sighting_pair_window must be >= 0")
         if not 0 < self.join_confidence < 1:
             raise ValueError("join_confidence must be in (0, 1)")
         if self.z_variance <= 0:

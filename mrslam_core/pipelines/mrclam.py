@@ -186,7 +186,9 @@ def run(ds: MrclamDataset, cfg: MrclamConfig, progress: bool = False) -> dict:
          "update_ms": (S,) wall time per team step of all the mappers' work (feeding, ordering,
          filter steps) [ms], "mapper_ms": the mappers' own update times [ms], "landmarks": {"mean",
          "cov"} of the (first) mapper's best particle, "dropped": the mappers' counters summed,
-         "resamples": per mapper}
+         "resamples": per mapper, "merges": every join attempt of a robot in ``unknown_start``
+         (:attr:`~mrslam_core.pipelines.central.lifecycle.Lifecycle.merges`)}; the estimate of a
+         robot in ``unknown_start`` is NaN before its merge
     """
     ds = ds.calibrated(cfg.calibration)
     t0, t1 = ds.time_span()
@@ -232,6 +234,8 @@ def run(ds: MrclamDataset, cfg: MrclamConfig, progress: bool = False) -> dict:
         for r, (stamps, poses) in mapper.trajectories().items():
             est = np.vstack([starts[r], interpolate_poses(grid[1:], stamps.astype(float), poses)]) if len(stamps) \
                 else np.full((len(times), 3), np.nan)
+            if r in cfg.unknown_start and len(stamps):  # no map pose before its merge
+                est[grid < stamps[0]] = np.nan
             trajectories[r] = {"t": times - 0.0, "est": est, "gt": ds.groundtruth(robot_number(r), times),
                                "odom": odo[r].trajectory(starts[r], times)}
     _, mean, cov, _, _ = mappers[0].slam.best_map()
@@ -246,6 +250,7 @@ def run(ds: MrclamDataset, cfg: MrclamConfig, progress: bool = False) -> dict:
         "landmarks": {"mean": mean, "cov": cov},
         "dropped": dropped,
         "resamples": [m.slam.resamples for m in mappers],
+        "merges": [dict(e) for m in mappers for e in m.merges],
     }
 
 

@@ -111,6 +111,10 @@ class CentralConfig:
         unknown_start: robots whose start pose is unknown (their ``start_poses`` entries are not
             used); if every robot is listed, the first one's start pose defines the map frame.
         merge_every: updates of a robot with an unknown start between attempts to align its map.
+        rendezvous: the robots measure each other (sightings in their sets): a robot not merged
+            also joins when it and a robot of the central filter read each other, and a weak
+            alignment is held until a sighting agrees (:class:`~.lifecycle.Lifecycle`). Off: no
+            second source of evidence, so every consistent alignment joins.
         sample_gap: when a robot's previous update is older than this, its motion up to 0.2 s
             before the set is applied first without observations (each particle draws its own
             motion noise), then the rest with the set: the particles then associate the set
@@ -154,6 +158,7 @@ class CentralConfig:
     team_step: float = 0.0
     unknown_start: tuple[str, ...] = ()
     merge_every: int = 10
+    rendezvous: bool = False
     sample_gap: float = 1.0
     relocalize_after: float = 5.0
     relocalize_tries: int = 3

@@ -173,6 +173,8 @@ class CentralMapper:
             self.ordering.last[obs.robot] = (obs.stamp_ns, pairing.odom)
             made.append((obs, filt, pairing.odom, held))
         failed: set[int] = set()
+        if id(self.slam) in steps:
+            self.lifecycle.hold_gauge(self.slam)
         for key, (filt, updates) in steps.items():
             try:
                 filt.step(updates)
@@ -194,6 +196,7 @@ class CentralMapper:
             elif filt is not self.slam:
                 self.lifecycle.updated(self.slam, obs.robot, obs.stamp_ns)
             last[obs.robot] = obs.stamp_ns
+        self.lifecycle.rendezvous(self.slam, [obs for obs, filt, _, _ in made if id(filt) not in failed])
         done = []
         for obs, _, odom, held in made:
             if last.get(obs.robot) != obs.stamp_ns:

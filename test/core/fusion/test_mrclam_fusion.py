@@ -16,20 +16,21 @@ from mrslam_core.pipelines.mrclam import run as run_known_start
 @pytest.mark.slow
 def test_unknown_start_robots_are_merged_and_tracked(mrclam6):
     """First 300 s, M = 300, seed 0 (~25 s: the unknown-start run, the known-start run and robot 1
-    alone). The bounds are relative to runs of the same seed, so that they measure the joins and
-    not one seed's filter noise; each holds with a margin over filter seeds 0–4 (measured):
-    - robot 3's first mutual sighting with robot 1 (17.8 s) is held and the second confirms it;
-      robot 5 joins by a rendezvous with robot 3 at 43.6–43.8 s, robot 2 by map alignment at
-      45 s (6 inliers), robot 4 by map alignment at 75–100 s (5–7 inliers);
+    alone, each through the central mapper). The bounds are relative to runs of the same seed, so
+    that they measure the joins and not one seed's filter noise; each holds with a margin over
+    filter seeds 0–4 (measured, docs/fusion.md "The slow test"):
+    - robot 3's first mutual sighting with robot 1 is held and the second (17.6 s) confirms it;
+      robot 5 joins by a rendezvous with robot 3 at 43.6 s, robot 2 by map alignment at 45.2 s
+      (6 inliers), robot 4 by map alignment at 73–96 s (5–6 inliers);
     - each robot's ATE after one rigid transform for the whole team (the frame fitted away) over
-      the known-start run's, same window: 0.37–1.41 (bound 1.6);
+      the known-start run's, same window: 0.45–1.56 (bound 1.8);
     - each robot's unaligned ATE over robot 1's with nothing joined (robot 1 alone: 0.29–0.35 m;
       the unknown-start frame rests on robot 1's start only, and the joined robots' observations
-      move it): 0.35–1.39, robot 1 itself 0.35 / 0.93 / 1.27 / 1.37 / 1.39 (bound 1.6);
-    - each joined robot's unaligned ATE over robot 1's in the same run: 0.63–1.63 (bound 2);
+      move it): 0.70–1.88, robot 1 itself 1.08 / 1.88 / 0.98 / 1.30 / 1.37 (bound 2.2);
+    - each joined robot's unaligned ATE over robot 1's in the same run: 0.63–0.99 (bound 2);
     - the mean unaligned ATE over dead reckoning from the TRUE start pose (0.58–1.13 m per
-      robot), same windows: 0.15–0.46 (bound 0.6).
-    The unaligned ATE itself (robot 1: 0.11–0.49 m) and its ratio to the known-start run (whose
+      robot), same windows: 0.31–0.56 (bound 0.7).
+    The unaligned ATE itself (robot 1: 0.30–0.62 m) and its ratio to the known-start run (whose
     frame rests on five Vicon start poses) are not bounded: they measure robot 1's start, not the
     joins."""
     ds = MrclamDataset(mrclam6)
@@ -61,12 +62,12 @@ def test_unknown_start_robots_are_merged_and_tracked(mrclam6):
         dead = OdometryIntegrator(ds.robots[i].odometry, cfg.mrclam.odometry_delay).trajectory(
             ds.groundtruth(i, np.array([t0]))[0], res["times"])
         odo[r] = ate_rmse(dead[k:], res["gt"][r][k:])
-        # each robot's own error (the team frame removed in both runs) within 1.6x of the known start
-        assert free[r] < 1.6 * free_known[r], (r, free[r], free_known[r])
-        # the joins move the single-anchor frame by less than 1.6x of its error without them
-        assert raw[r] < 1.6 * anchor, (r, raw[r], anchor)
+        # each robot's own error (the team frame removed in both runs) within 1.8x of the known start
+        assert free[r] < 1.8 * free_known[r], (r, free[r], free_known[r])
+        # the joins move the single-anchor frame by less than 2.2x of its error without them
+        assert raw[r] < 2.2 * anchor, (r, raw[r], anchor)
     # a joined robot lies in the common frame about as well as the robot that anchors it
     for r in merged:
         assert raw[r] < 2.0 * raw["robot1"], (r, raw[r], raw["robot1"])
     # far better than dead reckoning that even knows the true start pose
-    assert np.mean(list(raw.values())) < 0.6 * np.mean(list(odo.values())), (raw, odo)
+    assert np.mean(list(raw.values())) < 0.7 * np.mean(list(odo.values())), (raw, odo)
