@@ -361,9 +361,12 @@ class SlamNode(Node):
 
     def _log_merges(self) -> None:
         for m in self.mapper.merges[self._merges_logged:]:
-            if m["accepted"]:
-                self.get_logger().info(f"{m['robot']} merged into the map: transform {m['transform']}, "
-                                       f"{m['inliers']} inliers, rmse {m['rmse_m']:.3f} m")
+            via = m.get("via", "alignment")  # a checkpoint of an earlier version has no "via"
+            if m["accepted"] and via == "alignment":
+                self.get_logger().info(f"{m['robot']} merged into the map by map alignment: transform "
+                                       f"{m['transform']}, {m['inliers']} inliers, rmse {m['rmse_m']:.3f} m")
+            elif m["accepted"]:
+                self.get_logger().info(f"{m['robot']} merged into the map by {via}: transform {m['transform']}")
             else:
                 self.get_logger().info(f"{m['robot']} not merged yet: {m['reason']}", throttle_duration_sec=10.0)
         self._merges_logged = len(self.mapper.merges)

@@ -300,12 +300,11 @@ def _reading(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.array([np.hypot(*d), np.arctan2(d[1], d[0]) - a[2]])
 
 
-def test_a_robot_with_an_unknown_start_joins_on_the_second_mutual_sighting():
-    """Rendezvous in the mapper (``rendezvous``): robot2 (no start pose, alignments off) and robot1
-    read each other at steps 20 and 22 (exact readings, stated σ 0.05 m / 0.02 rad). The first
-    mutual sighting is held, the second agrees and joins robot2 at its true pose (its transform
-    0.05 m / 1.2° off the true start; robot2 tracked within 0.062 m after it); one-way readings
-    (step 10: robot1's only) join nothing."""
+def _rendezvous_run(resume_in: Path | None = None, resume_at: int = -1) -> tuple[CentralMapper, dict, list[int]]:
+    """robot2 (no start pose, alignments off) and robot1 read each other at steps 20 and 22
+    (exact readings, stated σ 0.05 m / 0.02 rad), robot1 alone reads robot2 at step 10; with
+    ``resume_in`` the mapper is saved and resumed after step ``resume_at``. Returns the mapper, the
+    true poses by (robot, stamp) and robot2's stamps."""
     from dataclasses import replace
 
     from mrslam_core.datasets.synthetic import SyntheticWorld, SyntheticWorldConfig
@@ -331,18 +330,39 @@ def test_a_robot_with_an_unknown_start_joins_on_the_second_mutual_sighting():
             obs = u.observations
             other = 1 - k
             if i in (20, 22) or (i == 10 and k == 0):
-                obs = replace(obs, sightings=(RobotSighting(u.robot, world.robots[other], _reading(true[k], true[other]), cov),))
+                z = _reading(true[k], true[other])
+                obs = replace(obs, sightings=(RobotSighting(u.robot, world.robots[other], z, cov),))
             m.add_observations(obs)
         m.process()
+        if resume_in is not None and i == resume_at:
+            m = CentralMapper.resume(cfg, m.save(resume_in / "ckpt.npz"))
+    return m, truth, sorted({s for r, s in truth if r == "robot2"})
+
+
+def test_a_robot_with_an_unknown_start_joins_on_the_second_mutual_sighting():
+    """Rendezvous in the mapper (``rendezvous``): the first mutual sighting (step 20) is held, the
+    second (step 22) agrees and joins robot2 at its true pose (its transform 0.05 m / 1.2° off the
+    true start; robot2 tracked within 0.062 m after it); the one-way reading of step 10 joins
+    nothing."""
+    m, truth, stamps = _rendezvous_run()
     tried = [(e["stamp_ns"], e["via"], e["accepted"]) for e in m.merges]
-    stamps = sorted({s for r, s in truth if r == "robot2"})
-    assert tried == [(stamps[20], "rendezvous with robot1", False), (stamps[22], "rendezvous with robot1", True)], m.merges
+    assert tried == [(stamps[20], "rendezvous with robot1", False),
+                     (stamps[22], "rendezvous with robot1", True)], m.merges
     assert "held until a second piece of evidence" in m.merges[0]["reason"]
     assert "robot2" not in m.local
     t, poses = m.trajectories()["robot2"]
     assert t[0] == stamps[22]
     err = [np.linalg.norm(p[:2] - truth[("robot2", s)][:2]) for s, p in zip(t, poses)]
     assert max(err) < 0.1, err
+
+
+def test_a_mapper_resumed_between_two_mutual_sightings_joins_as_without_the_checkpoint(tmp_path):
+    """The held sighting and the readings are in the checkpoint: resumed after step 21, the second
+    sighting joins robot2 at the same step and to the same poses."""
+    a, _, _ = _rendezvous_run()
+    b, _, _ = _rendezvous_run(resume_in=tmp_path, resume_at=21)
+    assert a.merges == b.merges
+    _assert_same_trajectories(a.trajectories(), b.trajectories())
 
 
 def _world(n: int = 300, seed: int = 4) -> tuple[np.ndarray, np.ndarray]:

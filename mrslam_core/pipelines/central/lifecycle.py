@@ -43,8 +43,8 @@ class Lifecycle:
         local: robot -> its local filter (K = 1, the robot's own start frame): the unknown-start
             or restarted robots not merged yet.
         merges: every join attempt: robot, stamp_ns, via ("alignment" or "rendezvous with
-            <robot>"), accepted, reason, inliers, rmse_m, transform; an accepted one also
-            fused / added / dropped (landmarks).
+            <robot>"), accepted, reason, inliers, rmse_m (None for a rendezvous), transform; an
+            accepted one also fused / added / dropped (landmarks).
         gate: the held evidence of the robots not merged (with ``rendezvous``; else None).
         restarts: every odometry reset: robot, stamp_ns, jump_m, turn_rad.
 
@@ -139,7 +139,7 @@ class Lifecycle:
                      float(al.rmse))
 
     def _record(self, robot: str, stamp_ns: int, via: str, joined, reason: str, transform: np.ndarray,
-                inliers: int, rmse: float) -> None:
+                inliers: int | None, rmse: float | None) -> None:
         entry = {"robot": robot, "stamp_ns": stamp_ns, "via": via, "accepted": joined is not None, "reason": reason,
                  "inliers": inliers, "rmse_m": rmse, "transform": [float(v) for v in transform]}
         if joined is not None:
@@ -176,7 +176,7 @@ class Lifecycle:
                                         "reason": self.gate.log[robot][-1]})
                     continue
                 joined = join_rendezvous(slam, self.local[robot], robot, rv, self.cfg.fusion)
-                self._record(robot, obs.stamp_ns, via, joined, "", rv.transform, 0, float("nan"))
+                self._record(robot, obs.stamp_ns, via, joined, "", rv.transform, None, None)
                 self._readings = {k: v for k, v in self._readings.items() if robot not in k}
                 if not self.local:
                     return
@@ -191,10 +191,11 @@ class Lifecycle:
         out: dict[str, Any] = {"unmerged": sorted(self.local), "local_updates": dict(self._updates),
                                "merges": [dict(m) for m in self.merges],
                                "restarts": [dict(r) for r in self.restarts],
-                               "readings": [[a, b, t, z.tolist(), c.tolist()] for (a, b), (t, z, c) in self._readings.items()]}
+                               "readings": [[a, b, t, z.tolist(), c.tolist()]
+                                            for (a, b), (t, z, c) in self._readings.items()]}
         if self.gate is not None:
-            out["gate_held"] = {r: [[t, e.transform.tolist(), e.cov.tolist(), e.kind, e.strong, e.source] for t, e in held]
-                                for r, held in self.gate.held.items()}
+            out["gate_held"] = {r: [[t, e.transform.tolist(), e.cov.tolist(), e.kind, e.strong, e.source]
+                                    for t, e in held] for r, held in self.gate.held.items()}
         for k, r in enumerate(self._robots):
             if r in self.local:
                 out.update({f"local_{k}.{key}": v for key, v in filter_state(self.local[r]).items()})
