@@ -31,7 +31,7 @@ from mrslam_core.experiments._output import write_tables
 from mrslam_core.fusion.alignment import alignment_error, apply_transform, rigid_transform_2d
 from mrslam_core.fusion.config import FusionConfig
 from mrslam_core.pipelines.mrclam import MrclamConfig, robot_number
-from mrslam_core.pipelines.mrclam import run as run_known_start
+from mrslam_core.pipelines.mrclam import run as run_mapper
 from mrslam_core.slam.config import FilterConfig
 
 
@@ -99,13 +99,13 @@ def run_unknown_start(ds: MrclamDataset, cfg: MrclamFusionConfig, progress: bool
          "inliers", "rmse_m", "start_error_m", "start_error_deg", "fused", "added", "dropped",
          "join_pose_error_m"}}, "attempts": {robot: [reasons]}, "update_ms": (S,)}
     """
-    res = run_known_start(ds, cfg.unknown_start_config(), progress)
+    mc = cfg.unknown_start_config()
+    res = run_mapper(ds, mc, progress)
     traj = res["trajectories"]
-    any_robot = next(iter(traj.values()))
-    times = any_robot["t"]
+    times = traj[mc.robots[0]]["t"]
     t0 = times[0]
     merged: dict[str, dict] = {}
-    attempts: dict[str, list[str]] = {r: [] for r in cfg.unknown_start_config().unknown_start}
+    attempts: dict[str, list[str]] = {r: [] for r in mc.unknown_start}
     for m in res["merges"]:
         r = m["robot"]
         if not m["accepted"]:
@@ -156,7 +156,7 @@ def compare(ds: MrclamDataset, cfg: MrclamFusionConfig, progress: bool = False) 
     unknown = run_unknown_start(ds, cfg, progress)
     t_unknown = time.perf_counter() - tic
     tic = time.perf_counter()
-    known = run_known_start(ds, cfg.mrclam)
+    known = run_mapper(ds, cfg.mrclam)
     t_known = time.perf_counter() - tic
     known_names = [f"robot{i}" for i in cfg.known]
     first = {r: unknown["merged"][r]["step"] if r in unknown["merged"] else 0
