@@ -25,9 +25,10 @@ from mrslam_core.slam.filter import MultiRobotFastSLAM
 
 
 def map_is_empty(slam: MultiRobotFastSLAM) -> bool:
-    """True when no particle of ``slam`` holds a landmark."""
+    """True when no particle of ``slam`` holds a landmark (each distinct chunk of the store
+    visited once, not every particle's map: the mapper asks before every step)."""
     store = slam.landmarks
-    return store.size == 0 or not bool(store.exists_dense().any())
+    return store.size == 0 or not bool(store.held().any())
 
 
 def hold_gauge(slam: MultiRobotFastSLAM, robots: list[str] | None = None) -> bool:

@@ -28,7 +28,7 @@ from mrslam_core.geometry.se2 import wrap_angle
 from mrslam_core.pipelines.central.config import ODOM_RESET_FLOOR, CentralConfig
 from mrslam_core.slam.checkpoint import filter_from_state, filter_state
 from mrslam_core.slam.filter import MultiRobotFastSLAM
-from mrslam_core.types import ObservationSet
+from mrslam_core.types import ObservationSet, RobotSighting
 
 
 class Lifecycle:
@@ -154,32 +154,43 @@ class Lifecycle:
         sighting through. The transform uses both robots' weighted-mean poses now."""
         if self.gate is None or not self.local:
             return
-        window_ns = round(self.cfg.fusion.sighting_pair_window * 1e9)
         for obs in sets:
             for s in obs.sightings:
-                i, j = s.observer, s.target
-                if i in self.local and j in slam.index:
-                    robot, seen = i, j
-                elif j in self.local and i in slam.index:
-                    robot, seen = j, i
-                else:
-                    continue
-                self._readings[(i, j)] = (obs.stamp_ns, np.asarray(s.z, float), np.asarray(s.cov, float))
-                back = self._readings.get((j, i))
-                if back is None or abs(back[0] - obs.stamp_ns) > window_ns:
-                    continue
-                mine, theirs = (self._readings[(robot, seen)], self._readings[(seen, robot)])
-                rv = sighting_transform(slam, self.local[robot], seen, mine[1], theirs[1], mine[2], theirs[2])
-                via = f"rendezvous with {seen}"
-                if self.gate.offer_sighting(robot, obs.stamp_ns * 1e-9, rv) is None:
-                    self.merges.append({"robot": robot, "stamp_ns": obs.stamp_ns, "via": via, "accepted": False,
-                                        "reason": self.gate.log[robot][-1]})
-                    continue
-                joined = join_rendezvous(slam, self.local[robot], robot, rv, self.cfg.fusion)
-                self._record(robot, obs.stamp_ns, via, joined, "", rv.transform, None, None)
-                self._readings = {k: v for k, v in self._readings.items() if robot not in k}
-                if not self.local:
-                    return
+                pair = self._mutual(slam, obs.stamp_ns, s)
+                if pair is not None:
+                    self._offer_sighting(slam, obs.stamp_ns, *pair)
+                    if not self.local:
+                        return
+
+    def _mutual(self, slam: MultiRobotFastSLAM, stamp_ns: int, s: RobotSighting) -> tuple[str, str] | None:
+        """Note sighting ``s`` (at ``stamp_ns``) if it is between a robot not merged and a robot of
+        ``slam``; (that robot, the seen one) when the other's reading back lies within the window."""
+        i, j = s.observer, s.target
+        if i in self.local and j in slam.index:
+            pair = (i, j)
+        elif j in self.local and i in slam.index:
+            pair = (j, i)
+        else:
+            return None
+        self._readings[(i, j)] = (stamp_ns, np.asarray(s.z, float), np.asarray(s.cov, float))
+        back = self._readings.get((j, i))
+        if back is None or abs(back[0] - stamp_ns) > round(self.cfg.fusion.sighting_pair_window * 1e9):
+            return None
+        return pair
+
+    def _offer_sighting(self, slam: MultiRobotFastSLAM, stamp_ns: int, robot: str, seen: str) -> None:
+        """Offer the mutual sighting of ``robot`` (not merged) and ``seen`` to the gate; join the
+        robot if it lets it through."""
+        (_, z_rs, cov_rs), (_, z_sr, cov_sr) = self._readings[(robot, seen)], self._readings[(seen, robot)]
+        rv = sighting_transform(slam, self.local[robot], seen, z_rs, z_sr, cov_rs, cov_sr)
+        via = f"rendezvous with {seen}"
+        if self.gate.offer_sighting(robot, stamp_ns * 1e-9, rv) is None:
+            self.merges.append({"robot": robot, "stamp_ns": stamp_ns, "via": via, "accepted": False,
+                                "reason": self.gate.log[robot][-1]})
+            return
+        joined = join_rendezvous(slam, self.local[robot], robot, rv, self.cfg.fusion)
+        self._record(robot, stamp_ns, via, joined, "", rv.transform, None, None)
+        self._readings = {k: v for k, v in self._readings.items() if robot not in k}
 
     # ------------------------------------------------------------------ checkpoint
     def state(self) -> dict[str, Any]:
