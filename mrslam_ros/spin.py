@@ -13,36 +13,53 @@ from collections.abc import Callable
 import rclpy
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
+from rclpy.signals import SignalHandlerOptions
 
 
-def run_node(make: Callable[[], Node], argv: list[str] | None = None, threads: int = 1) -> int:
-    """Create the node with ``make`` after ``rclpy.init(argv)`` and spin it (with a multi-threaded
-    executor of ``threads`` threads when > 1, for nodes with several callback groups); returns 0."""
-    rclpy.init(args=argv if argv is not None else sys.argv)
-    # A node that a launcher's SIGINT did not stop gets SIGTERM: print where every thread is
-    # (into the node's log) before rclpy's own handler runs, so a hang names its cause.
+#: longest a stop request waits for the executor to look at it [s]
+STOP_POLL = 0.1
+
+
+def run_node(make: Callable[[], Node], argv: list[str] | None = None) -> int:
+    """Create the node with ``make`` after ``rclpy.init(argv)`` and spin it on one thread until
+    a stop is requested or the context shuts down; returns 0.
+
+    SIGINT and SIGTERM request a stop that the spin loop takes between callbacks, so a callback
+    always runs to its end: an interrupt raised inside an update would leave the map half-updated
+    before the node writes its checkpoint and outputs, and inside compiled (numba) code it surfaces
+    as a ``SystemError`` instead of a ``KeyboardInterrupt``. A second signal while the stop is
+    pending interrupts at once (a hung callback; the launcher's SIGTERM after its SIGINT).
+    """
+    rclpy.init(args=argv if argv is not None else sys.argv, signal_handler_options=SignalHandlerOptions.NO)
+    stop = threading.Event()
+
+    def request_stop(signum: int, frame: object) -> None:
+        if stop.is_set():
+            raise KeyboardInterrupt
+        stop.set()
+
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, request_stop)
+    # A node that did not stop after the first signal gets a second: print where every thread is
+    # (into the node's log) before the interrupt, so a hang names its cause.
     faulthandler.register(signal.SIGTERM, all_threads=True, chain=True)
     node = make()
+    executor = SingleThreadedExecutor()
     try:
-        if threads > 1:
-            from rclpy.executors import MultiThreadedExecutor
-
-            executor = MultiThreadedExecutor(num_threads=threads)
-            executor.add_node(node)
-            executor.spin()
-        else:
-            executor = SingleThreadedExecutor()
-            executor.add_node(node)
-            while executor.context.ok():
-                try:
-                    executor.spin_once()
-                except RuntimeError as exc:
-                    if not failed_take(exc):
-                        raise
-                    drop_untakeable(node, exc)
+        executor.add_node(node)
+        while executor.context.ok() and not stop.is_set():
+            try:
+                executor.spin_once(timeout_sec=STOP_POLL)
+            except RuntimeError as exc:
+                if not failed_take(exc):
+                    raise
+                drop_untakeable(node, exc)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
+        # The executor's paused wait generator holds the node's handles "in use"; until it is
+        # dropped, rcl's destroy of the node waits for them (an interrupt used to close it).
+        executor.shutdown(timeout_sec=0)
         teardown(node)
     return 0
 

@@ -99,3 +99,59 @@ def test_a_teardown_that_hangs_ends_the_process_cleanly_and_says_where():
 def test_a_node_is_released_and_rclpy_shut_down():
     proc = subprocess.run([sys.executable, "-c", CLEAN], capture_output=True, text=True, timeout=60)
     assert proc.returncode == 0 and "released False" in proc.stdout, proc.stderr
+
+
+BUSY = """
+import sys, time
+from rclpy.node import Node
+from mrslam_ros.spin import run_node
+
+class Busy(Node):
+    def __init__(self):
+        super().__init__("busy")
+        self.create_timer(0.01, self.work)
+
+    def work(self):
+        print("begin", flush=True)
+        time.sleep(float(sys.argv[1]))
+        print("end", flush=True)
+
+    def destroy_node(self):
+        print("destroyed", flush=True)
+        super().destroy_node()
+
+sys.exit(run_node(Busy, []))
+"""
+
+
+def _interrupt(seconds: float, signals: list) -> tuple[subprocess.CompletedProcess, float]:
+    """Start the busy node (its first callback sleeps ``seconds``), send ``signals`` 0.3 s apart
+    once the callback began; the process result and the wall time from the first signal."""
+    proc = subprocess.Popen([sys.executable, "-c", BUSY, str(seconds)], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    assert proc.stdout.readline().strip() == "begin"
+    start = time.monotonic()
+    for sig in signals:
+        proc.send_signal(sig)
+        time.sleep(0.3)
+    out, err = proc.communicate(timeout=30)
+    return subprocess.CompletedProcess(proc.args, proc.returncode, "begin\n" + out, err), time.monotonic() - start
+
+
+def test_a_stop_signal_lets_the_running_callback_finish_before_the_teardown():
+    import signal
+
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        proc, _ = _interrupt(1.5, [sig])
+        assert proc.returncode == 0, proc.stderr
+        assert proc.stdout.split() == ["begin", "end", "destroyed"], proc.stdout
+        assert "did not finish" not in proc.stderr, proc.stderr  # the executor let go of the node
+
+
+def test_a_second_signal_interrupts_a_hung_callback():
+    import signal
+
+    proc, wall = _interrupt(60.0, [signal.SIGINT, signal.SIGTERM])
+    assert proc.returncode == 0 and wall < 10, (proc.returncode, wall, proc.stderr)
+    assert proc.stdout.split() == ["begin", "destroyed"], proc.stdout
+    assert "time.sleep" in proc.stderr or "work" in proc.stderr  # faulthandler: where it hung
