@@ -95,8 +95,9 @@ class _Reference(TeamSim2D):
         cam = cfg.sim.camera
         sensor = SensorConfig(fov=float(np.radians(cam.hfov_deg)), beams=cfg.frontend.scan_bins,
                               max_range=cfg.frontend.scan_max_range, rate_hz=cam.rate_hz)
-        super().__init__(world, cfg.robots, cfg.exploration, sensor=sensor, grid=cfg.grid, seed=seed,
-                         control=cfg.control)
+        # the 2-D sensor's ranges are exact: its hits are not spread by a stereo range error
+        super().__init__(world, cfg.robots, cfg.exploration, sensor=sensor, grid=replace(cfg.grid, range_noise=0.0),
+                         seed=seed, control=cfg.control)
         self.truth_free = world.reachable_free(cfg.grid.resolution)
         self.truth_res = cfg.grid.resolution
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy import special
 
 from mrslam_core.exploration.config import GridConfig
 
@@ -162,6 +163,19 @@ class OccupancyGrid:
     def occupied(self) -> np.ndarray:
         return self.observed & (self.probability() > self.cfg.occupied_above)
 
+    def hit_logodds(self, ranges: np.ndarray) -> np.ndarray:
+        """Log-odds a hit at each of ``ranges`` (N,) [m] adds to its end cell (N,): ``hit`` for
+        exact ranges, less where the range error σ = ``range_noise``·range² spreads the surface
+        over more than the cell (``GridConfig.range_noise``)."""
+        c = self.cfg
+        ranges = np.asarray(ranges, float)
+        if c.range_noise <= 0:
+            return np.full(ranges.shape, c.hit)
+        sigma = np.maximum(c.range_noise * ranges**2, 1e-12)
+        in_cell = special.erf(self.res / (2.0 * np.sqrt(2.0) * sigma))
+        p = 0.5 + (special.expit(c.hit) - 0.5) * in_cell
+        return special.logit(p)
+
     def insert(self, pose: np.ndarray, scan: Scan, teammates: np.ndarray | None = None) -> None:
         """Trace each beam from the robot at ``pose`` (x, y, θ) map frame: cells passed get
         ``miss``, the end cell of a hit ``hit``; hits on ``teammates`` (K, 2) [m], the other
@@ -193,13 +207,18 @@ class OccupancyGrid:
         self._cover_cells(reach.min(axis=0), reach.max(axis=0))
         width = self.shape[1]
         free_keys = np.unique((free[:, 0] - self.offset[0]) * width + free[:, 1] - self.offset[1])
-        hit_keys = np.unique((hits[:, 0] - self.offset[0]) * width + hits[:, 1] - self.offset[1])
+        hit_keys, beam_of = np.unique((hits[:, 0] - self.offset[0]) * width + hits[:, 1] - self.offset[1],
+                                      return_inverse=True)
         # a cell holding an obstacle end is not cleared by other beams
         cleared = np.setdiff1d(free_keys, hit_keys, assume_unique=True)
         c = self.cfg
-        for keys, add in ((cleared, c.miss), (hit_keys, c.hit)):
+        add = np.full(len(hit_keys), c.hit)
+        if c.range_noise > 0 and len(hit_keys):  # several beams ending in one cell: the surest counts
+            add = np.zeros(len(hit_keys))
+            np.maximum.at(add, beam_of.ravel(), self.hit_logodds(scan.ranges[scan.hit]))
+        for keys, step in ((cleared, c.miss), (hit_keys, add)):
             rc = np.divmod(keys, width)
-            self.logodds[rc] = np.clip(self.logodds[rc] + add, -c.clamp, c.clamp)
+            self.logodds[rc] = np.clip(self.logodds[rc] + step, -c.clamp, c.clamp)
         self.observed[np.divmod(free_keys, width)] = True
         self.observed[np.divmod(hit_keys, width)] = True
 

@@ -57,7 +57,7 @@ class TeamConfig:
             simulator's), ``visual`` (the frontend's visual odometry) or ``fused`` (both, step by
             step with their information matrices, :class:`OdometryFusion`, the wheels' noise
             model being ``filter.motion``). The frontends' search windows follow the wheels in all.
-        frontend, filter, exploration, control: by default the simulated team profile
+        frontend, filter, exploration, control, grid: by default the simulated team profile
             (config/sim_team.yaml).
     """
 
@@ -72,7 +72,7 @@ class TeamConfig:
     map_check: MapCheckConfig = field(default_factory=MapCheckConfig)
     exploration: ExplorationConfig = field(default_factory=lambda: profile_section(ExplorationConfig, TEAM_PROFILE, "exploration"))
     control: ControlConfig = field(default_factory=lambda: profile_section(ControlConfig, TEAM_PROFILE, "control"))
-    grid: GridConfig = field(default_factory=GridConfig)
+    grid: GridConfig = field(default_factory=lambda: profile_section(GridConfig, TEAM_PROFILE, "grid"))
 
     def __post_init__(self) -> None:
         if self.robots < 1 or not self.seconds > 0 or not self.control_period > 0:

@@ -197,3 +197,31 @@ def test_beams_or_poses_that_are_not_finite_mark_nothing_and_grow_nothing():
     assert grid.shape == (10, 20) and grid.observed.sum() == 11  # the first beam only: x 0.55..1.45 passed, 1.55 hit
     grid.insert(np.array([np.nan, 0.0, 0.0]), Scan(np.array([0.0]), np.array([1.0]), np.array([True])))
     assert grid.shape == (10, 20) and grid.observed.sum() == 11
+
+
+def test_a_hit_counts_by_the_chance_its_range_puts_the_surface_in_its_cell():
+    from math import erf, exp, log, sqrt
+
+    cfg = GridConfig(range_noise=0.011)
+    grid = OccupancyGrid(cfg)
+    p = 1.0 / (1.0 + exp(-cfg.hit))
+    for r in (0.5, 2.0, 6.0):
+        sigma = 0.011 * r * r
+        q = 0.5 + (p - 0.5) * erf(0.1 / (2.0 * sqrt(2.0) * sigma))
+        assert grid.hit_logodds(np.array([r]))[0] == pytest.approx(log(q / (1.0 - q)), rel=1e-12)
+    assert OccupancyGrid(GridConfig()).hit_logodds(np.array([0.5, 6.0])) == pytest.approx([cfg.hit, cfg.hit])
+    # a near hit makes its cell occupied at once; one 6 m away (σ 0.40 m, 0.081 log-odds) needs 8
+    occ = np.log(cfg.occupied_above / (1 - cfg.occupied_above))
+    pose = np.array([0.05, 0.05, 0.0])
+    for end, times in (((1.05, 0.05), 1), ((0.05, 6.05), int(np.ceil(occ / grid.hit_logodds(np.array([6.0]))[0])))):
+        fresh = OccupancyGrid(cfg)
+        for k in range(times):
+            fresh.insert(pose, _beam_to(pose, end))
+            assert fresh.occupied()[tuple(fresh.cell_of(np.array([end]))[0])] == (k == times - 1), (end, k)
+    assert times == 8
+
+
+def test_range_noise_must_be_finite_and_not_negative():
+    for bad in (-0.01, float("inf"), float("nan")):
+        with pytest.raises(ValueError, match="range_noise"):
+            GridConfig(range_noise=bad)
