@@ -106,14 +106,20 @@ class ObstacleScanner:
         """Scan from already triangulated base_link points (P, 3) [m]."""
         return scan_from_points(points_base, stamp_ns, self.angle_min, self.angle_max, self.cfg)
 
-    def from_images(self, left: np.ndarray, right: np.ndarray, stamp_ns: int) -> ObstacleScan:
-        """Scan from a rectified grey pair (H, W) uint8 by block matching at reduced resolution."""
+    def disparity(self, left: np.ndarray, right: np.ndarray) -> np.ndarray:
+        """Block-matching disparity of a rectified grey pair (H, W) uint8 at the reduced resolution:
+        (H // ds, W // ds) float32 in full-resolution pixels, ≤ 0 where none was found; reduced
+        pixel (i, j) covers full-resolution rows i·ds … i·ds + ds − 1 and those columns."""
         if self._ds > 1:
             left = cv2.resize(left, self._size, interpolation=cv2.INTER_AREA)
             right = cv2.resize(right, self._size, interpolation=cv2.INTER_AREA)
-        disp16 = self._bm.compute(left, right).ravel()
-        ok = disp16 > 0
-        d = disp16[ok].astype(np.float32) * (self._ds / 16.0)  # full-resolution disparity [px]
+        return self._bm.compute(left, right).astype(np.float32) * (self._ds / 16.0)
+
+    def from_images(self, left: np.ndarray, right: np.ndarray, stamp_ns: int) -> ObstacleScan:
+        """Scan from a rectified grey pair (H, W) uint8 by block matching at reduced resolution."""
+        disp = self.disparity(left, right).ravel()
+        ok = disp > 0
+        d = disp[ok]  # full-resolution disparity [px]
         z = (self.rig.f * self.rig.baseline) / d
         keep = (z >= self.cfg.min_depth) & (z <= self.cfg.max_depth)
         z = z[keep]
