@@ -8,6 +8,11 @@ true disparity f·b / z, z the mean depth of the full-resolution pixels it cover
 depths differ by more than 2 % (a depth edge inside the pixel) or beyond ``scan_max_range`` are left
 out. Per range band: the median and the robust σ (1.4826 · MAD) of the error [px]. Over all bands,
 σd / (f·b) is the ``GridConfig.range_noise`` of a scan from this rig [1/m].
+
+The scan itself (each bearing bin's nearest point in the obstacle band) is compared with the scan
+of the rendered depth (``ObstacleScanner.from_depth``, each reduced pixel at the nearest depth it
+covers): per band of the true range, the share of bins whose stereo range is more than 0.2 m
+short of it (a false obstacle in front of the true one) or long.
 """
 
 from __future__ import annotations
@@ -42,11 +47,15 @@ class NoiseFit:
         ranges: (P,) depth of every compared pixel [m].
         errors: (P,) measured − true disparity [px].
         fb: f·b of the rig [px·m].
+        bins_true, bins_scan: (B,) every scan bin with a hit in both: its range in the scan of
+            the rendered depth and in the stereo scan [m].
     """
 
     ranges: np.ndarray
     errors: np.ndarray
     fb: float
+    bins_true: np.ndarray
+    bins_scan: np.ndarray
 
     @property
     def sigma_d(self) -> float:
@@ -57,6 +66,18 @@ class NoiseFit:
     def range_noise(self) -> float:
         """σd / (f·b): the grid's ``range_noise`` [1/m]."""
         return self.sigma_d / self.fb
+
+    def bin_bands(self, off: float = 0.2) -> list[dict]:
+        """Per band of the true range: scan bins, median range error [m], share of bins more than
+        ``off`` [m] short and long."""
+        out = []
+        for lo, hi in zip(BANDS[:-1], BANDS[1:]):
+            s = (self.bins_true >= lo) & (self.bins_true < hi)
+            e = self.bins_scan[s] - self.bins_true[s]
+            if len(e):
+                out.append({"from_m": lo, "to_m": hi, "bins": int(len(e)), "median_m": float(np.median(e)),
+                            "short": float(np.mean(e < -off)), "long": float(np.mean(e > off))})
+        return out
 
     def bands(self) -> list[dict]:
         """Per range band: pixels, median error and robust σ [px]."""
@@ -78,7 +99,7 @@ def measure(worlds: tuple[str, ...] = WORLDS, views: int = 8, frontend: Frontend
             seed: int = 0) -> NoiseFit:
     """The disparity error over ``views`` headings at every start pose of each of ``worlds``."""
     frontend = frontend or TeamConfig().frontend
-    ranges, errors = [], []
+    ranges, errors, bins_true, bins_scan = [], [], [], []
     fb = 0.0
     for world in worlds:
         cfg = replace(TeamConfig().sim, world=world, seed=seed)
@@ -106,7 +127,14 @@ def measure(worlds: tuple[str, ...] = WORLDS, views: int = 8, frontend: Frontend
                     use = (disp > 0) & flat & (z >= frontend.min_depth) & (z <= frontend.scan_max_range)
                     ranges.append(z[use])
                     errors.append(disp[use] - fb / z[use])
-    return NoiseFit(np.concatenate(ranges), np.concatenate(errors), float(fb))
+                    nearest = block.min(axis=(1, 3))
+                    truth = scanner.from_depth(np.where(nearest < cfg.camera.far, nearest, np.inf), 0)
+                    scan = scanner.from_images(left, right, 0)
+                    both = np.isfinite(truth.ranges) & np.isfinite(scan.ranges)
+                    bins_true.append(truth.ranges[both])
+                    bins_scan.append(scan.ranges[both])
+    return NoiseFit(*(np.concatenate(v) for v in (ranges, errors)), float(fb),
+                    *(np.concatenate(v) for v in (bins_true, bins_scan)))
 
 
 def main(argv: list[str]) -> int:
@@ -122,7 +150,13 @@ def main(argv: list[str]) -> int:
              "| range [m] | pixels | median error [px] | robust σ [px] |", "|---|---|---|---|"]
     for b in fit.bands():
         lines.append(f"| {b['from_m']:g}-{b['to_m']:g} | {b['pixels']} | {b['median_px']:+.3f} | {b['sigma_px']:.3f} |")
-    lines += ["", f"σd {fit.sigma_d:.3f} px; f·b {fit.fb:.2f} px·m; range_noise = σd / (f·b) = {fit.range_noise:.4f} 1/m"]
+    lines += ["", f"σd {fit.sigma_d:.3f} px; f·b {fit.fb:.2f} px·m; range_noise = σd / (f·b) = {fit.range_noise:.4f} 1/m",
+              "", "The scan's bins against the scan of the rendered depth:", "",
+              "| true range [m] | bins | median error [m] | > 0.2 m short | > 0.2 m long |", "|---|---|---|---|---|"]
+    for b in fit.bin_bands():
+        lines.append(f"| {b['from_m']:g}-{b['to_m']:g} | {b['bins']} | {b['median_m']:+.3f} | {100 * b['short']:.0f} % | "
+                     f"{100 * b['long']:.0f} % |")
     write_tables(args.out, "obstacle_noise", "\n".join(lines),
-                 {"sigma_d_px": fit.sigma_d, "fb": fit.fb, "range_noise": fit.range_noise, "bands": fit.bands()})
+                 {"sigma_d_px": fit.sigma_d, "fb": fit.fb, "range_noise": fit.range_noise, "bands": fit.bands(),
+                  "bins": fit.bin_bands()})
     return 0

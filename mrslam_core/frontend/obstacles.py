@@ -117,12 +117,18 @@ class ObstacleScanner:
 
     def from_images(self, left: np.ndarray, right: np.ndarray, stamp_ns: int) -> ObstacleScan:
         """Scan from a rectified grey pair (H, W) uint8 by block matching at reduced resolution."""
-        disp = self.disparity(left, right).ravel()
-        ok = disp > 0
-        d = disp[ok]  # full-resolution disparity [px]
-        z = (self.rig.f * self.rig.baseline) / d
-        keep = (z >= self.cfg.min_depth) & (z <= self.cfg.max_depth)
+        disp = self.disparity(left, right)
+        with np.errstate(divide="ignore"):
+            z = np.where(disp > 0, (self.rig.f * self.rig.baseline) / disp, np.inf)
+        return self.from_depth(z, stamp_ns)
+
+    def from_depth(self, z: np.ndarray, stamp_ns: int) -> ObstacleScan:
+        """Scan from depth along the optical axis at the reduced pixels (H // ds, W // ds) [m]
+        (:meth:`disparity`'s pixels); depths that are not finite or outside [min_depth,
+        max_depth] are none."""
+        z = np.asarray(z).ravel()
+        keep = np.isfinite(z) & (z >= self.cfg.min_depth) & (z <= self.cfg.max_depth)
         z = z[keep]
-        pts = np.stack([self._u[ok][keep] * z, self._v[ok][keep] * z, z], axis=1)
+        pts = np.stack([self._u[keep] * z, self._v[keep] * z, z], axis=1)
         t = self.rig.t_base_rect
         return self.from_points(pts @ t[:3, :3].T + t[:3, 3], stamp_ns)
