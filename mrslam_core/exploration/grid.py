@@ -178,7 +178,7 @@ class OccupancyGrid:
 
     def insert(self, pose: np.ndarray, scan: Scan, teammates: np.ndarray | None = None) -> None:
         """Trace each beam from the robot at ``pose`` (x, y, θ) map frame: cells passed get
-        ``miss``, the end cell of a hit ``hit``; hits on ``teammates`` (K, 2) [m], the other
+        ``miss``, the end cell of a hit :meth:`hit_logodds` of its range; hits on ``teammates`` (K, 2) [m], the other
         robots' positions, mark no obstacle (``teammate_radius``). The grid grows first to hold
         every cell marked (see the class).
 
