@@ -22,6 +22,12 @@ def interpolate_poses(t_query: np.ndarray, t: np.ndarray, poses: np.ndarray) -> 
     return out
 
 
+def robust_sigma(e: np.ndarray) -> float:
+    """σ of residuals ``e`` from their median absolute deviation (1.4826 MAD: the σ of a normal
+    core, whatever the outliers)."""
+    return 1.4826 * float(np.median(np.abs(e - np.median(e))))
+
+
 def position_errors(est: np.ndarray, gt: np.ndarray) -> np.ndarray:
     """Euclidean position error per timestamp (N,) [m]."""
     return np.linalg.norm(np.asarray(est)[:, :2] - np.asarray(gt)[:, :2], axis=1)

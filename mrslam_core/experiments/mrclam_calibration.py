@@ -33,6 +33,7 @@ import numpy as np
 from scipy.optimize import minimize
 
 from mrslam_core.datasets.mrclam import MrclamCalibration, MrclamDataset, OdometryIntegrator
+from mrslam_core.evaluation.metrics import robust_sigma
 from mrslam_core.experiments._output import write_tables
 from mrslam_core.geometry.se2 import between, wrap_angle
 from mrslam_core.pipelines.mrclam import MrclamConfig
@@ -44,11 +45,6 @@ from mrslam_core.slam.motion import predict_motion
 GROSS_RANGE, GROSS_BEARING = 0.6, 0.1
 
 MOTION_FIELDS = ("alpha1", "alpha2", "alpha3", "alpha4", "sigma_xy_rw", "sigma_theta_rw")
-
-
-def robust_sigma(e: np.ndarray) -> float:
-    """σ of residuals ``e`` from their median absolute deviation (1.4826 MAD)."""
-    return 1.4826 * float(np.median(np.abs(e - np.median(e))))
 
 
 def huber_line(x: np.ndarray, y: np.ndarray, k: float = 1.345, iterations: int = 20) -> tuple[np.ndarray, float]:

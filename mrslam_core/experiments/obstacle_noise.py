@@ -23,12 +23,12 @@ from dataclasses import dataclass, replace
 import cv2
 import numpy as np
 
+from mrslam_core.evaluation.metrics import robust_sigma
 from mrslam_core.experiments._output import write_tables
 from mrslam_core.frontend import FrontendConfig, StereoRig
 from mrslam_core.frontend.obstacles import ObstacleScanner
 from mrslam_core.pipelines.team import TeamConfig
 from mrslam_core.sim.simulation import Simulation
-from mrslam_core.sim.world import load_world
 
 #: the worlds measured by default: the office, and a generated warehouse and office (repetitive
 #: and texture-poor walls, shelving)
@@ -90,21 +90,17 @@ class NoiseFit:
         return out
 
 
-def robust_sigma(e: np.ndarray) -> float:
-    """1.4826 · the median absolute deviation from the median (σ of a normal core)."""
-    return float(1.4826 * np.median(np.abs(e - np.median(e))))
-
-
 def measure(worlds: tuple[str, ...] = WORLDS, views: int = 8, frontend: FrontendConfig | None = None,
             seed: int = 0) -> NoiseFit:
     """The disparity error over ``views`` headings at every start pose of each of ``worlds``."""
-    frontend = frontend or TeamConfig().frontend
+    team = TeamConfig()
+    frontend = frontend or team.frontend
     ranges, errors, bins_true, bins_scan = [], [], [], []
     fb = 0.0
     for world in worlds:
-        cfg = replace(TeamConfig().sim, world=world, seed=seed)
-        starts = np.asarray(load_world(world).start_poses, float)
+        cfg = replace(team.sim, world=world, seed=seed)
         with Simulation(cfg) as sim:
+            starts = np.asarray(sim.world.start_poses, float)
             for i, start in enumerate(starts):
                 sim.add_robot(f"robot{i + 1}", start)
             rig = StereoRig(*sim.camera_infos(), sim.camera_extrinsic())

@@ -212,10 +212,8 @@ class OccupancyGrid:
         # a cell holding an obstacle end is not cleared by other beams
         cleared = np.setdiff1d(free_keys, hit_keys, assume_unique=True)
         c = self.cfg
-        add = np.full(len(hit_keys), c.hit)
-        if c.range_noise > 0 and len(hit_keys):  # several beams ending in one cell: the surest counts
-            add = np.zeros(len(hit_keys))
-            np.maximum.at(add, beam_of.ravel(), self.hit_logodds(scan.ranges[scan.hit]))
+        add = np.full(len(hit_keys), -np.inf)  # several beams ending in one cell: the surest counts
+        np.maximum.at(add, beam_of.ravel(), self.hit_logodds(scan.ranges[scan.hit]))
         for keys, step in ((cleared, c.miss), (hit_keys, add)):
             rc = np.divmod(keys, width)
             self.logodds[rc] = np.clip(self.logodds[rc] + step, -c.clamp, c.clamp)
