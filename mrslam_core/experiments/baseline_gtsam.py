@@ -249,8 +249,14 @@ def solve_isam2(g: GraphSteps, every: int = 1) -> dict:
 
 def odometry_covariance(delta: np.ndarray, dt: float, cfg: MrclamConfig) -> np.ndarray:
     """(3, 3) covariance of a relative motion ``delta`` over dt [s] under the filter's motion model,
-    rotated from the start pose's frame into the end pose's (GTSAM's Pose2 between error)."""
+    rotated from the start pose's frame into the end pose's (GTSAM's Pose2 between error).
+
+    A still robot's interval (no motion in its odometry) has no motion noise in the filter's
+    model; here it is held to :data:`PRIOR_SIGMA`, as tight as the start poses, because iSAM2
+    cannot factor a between-factor of zero covariance.
+    """
     cov = predict_motion(np.zeros((1, 3)), delta, cfg.filter.motion, dt)[1][0]
+    cov = np.maximum(cov, np.diag(np.square(PRIOR_SIGMA)))
     c, s = np.cos(delta[2]), np.sin(delta[2])
     rot = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
     return rot @ cov @ rot.T

@@ -7,6 +7,10 @@ import numpy as np
 from mrslam_core.geometry.se2 import compose, wrap_angle
 from mrslam_core.slam.config import MotionConfig
 
+#: below this motion [m] and turn [rad] over an update the odometry reports none (floating-point
+#: round-off of identical poses)
+STILL = 1e-9
+
 
 def decompose(delta: np.ndarray, min_translation: float = 0.0) -> tuple[float, float, float]:
     """Relative motion (dx, dy, dθ) in the previous base frame -> (rot1, trans, rot2).
@@ -57,8 +61,14 @@ def sample_motion(
 
 def _walk_variance(cfg: MotionConfig, trans: float, turn: float, dt: float) -> np.ndarray:
     """Variances (3,) of the noise added in the robot frame on top of the (rot1, trans, rot2)
-    model: time random walk plus distance- and angle-proportional terms."""
-    t = max(dt, 0.0)
+    model: time random walk plus distance- and angle-proportional terms.
+
+    The random walk models how the executed motion departs from the reported one while the robot
+    moves; over an update whose odometry reports no motion at all it adds nothing (a
+    zero-velocity update), so a still robot's particles do not diffuse.
+    """
+    moving = abs(trans) > STILL or abs(float(wrap_angle(turn))) > STILL
+    t = max(dt, 0.0) if moving else 0.0
     d, a = abs(trans), abs(float(wrap_angle(turn)))
     var_xy = cfg.sigma_xy_rw**2 * t + cfg.var_xy_per_m * d
     return np.array([var_xy, var_xy, cfg.sigma_theta_rw**2 * t + cfg.var_theta_per_m * d + cfg.var_theta_per_rad * a])

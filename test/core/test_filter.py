@@ -344,8 +344,9 @@ def _means(slam):
 
 
 def _look_alike_run(outlier_gate):
-    """One robot standing still sees six landmarks, then (1 s later, pose σ 0.1 m from the
-    random walk) the same six with the sixth's point 0.12 m off: a look-alike."""
+    """One robot sees six landmarks, then, 1 s later and 1 mm on (pose σ 0.1 m from the random
+    walk, which a robot whose odometry reports no motion would not get), the same six with the
+    sixth's point 0.12 m off: a look-alike."""
     from mrslam_core.slam.config import MotionConfig
 
     cfg = FilterConfig(num_particles=50, seed=5, proposal="fastslam2", resample_threshold=0.0,
@@ -360,7 +361,7 @@ def _look_alike_run(outlier_gate):
     before = _means(slam)
     seen = pts.copy()
     seen[5, 1] += 0.12
-    slam.step([RobotUpdate("a", 10**9 + 1, np.zeros(3), _obs("a", 10**9 + 1, seen, cov, desc))])
+    slam.step([RobotUpdate("a", 10**9 + 1, np.array([1e-3, 0.0, 0.0]), _obs("a", 10**9 + 1, seen, cov, desc))])
     return slam, before
 
 
