@@ -67,9 +67,8 @@ def _walk_variance(cfg: MotionConfig, trans: float, turn: float, dt: float) -> n
     moves; over an update whose odometry reports no motion at all it adds nothing (a
     zero-velocity update), so a still robot's particles do not diffuse.
     """
-    moving = abs(trans) > STILL or abs(float(wrap_angle(turn))) > STILL
-    t = max(dt, 0.0) if moving else 0.0
     d, a = abs(trans), abs(float(wrap_angle(turn)))
+    t = max(dt, 0.0) if max(d, a) > STILL else 0.0
     var_xy = cfg.sigma_xy_rw**2 * t + cfg.var_xy_per_m * d
     return np.array([var_xy, var_xy, cfg.sigma_theta_rw**2 * t + cfg.var_theta_per_m * d + cfg.var_theta_per_rad * a])
 
