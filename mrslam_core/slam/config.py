@@ -24,9 +24,9 @@ class MotionConfig:
     ``alpha1·rot1² + alpha2·trans²`` (rotations) and ``alpha3·trans² + alpha4·(rot1² + rot2²)``
     (translation), plus a random walk of density ``sigma_xy_rw`` [m/√s] and ``sigma_theta_rw``
     [rad/√s] over the update's time span, so noise does not depend on how often a robot updates,
-    plus variances proportional to the distance travelled and the angle turned (``var_*_per_m``,
-    ``var_theta_per_rad``: the wheel-odometry model of 002 Table I and of the simulator, whose
-    statistics do not depend on the update rate either).
+    plus variances proportional to the distance travelled and the angle turned (the
+    ``var_*_per_m`` and ``var_theta_per_rad`` terms: the wheel-odometry model of 002 Table I and
+    of the simulator, whose statistics do not depend on the update rate either).
     The random walk accrues only over updates whose odometry reports motion: a robot whose
     odometry reports none stands still (a zero-velocity update; MR.CLAM's robots stand within
     0.5 mm and 0.17° of Vicon for their first 12–16 s of zero velocity), so its pose keeps no
