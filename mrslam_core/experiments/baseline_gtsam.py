@@ -46,7 +46,7 @@ from mrslam_core.evaluation.metrics import ate_rmse
 from mrslam_core.experiments._output import write_tables
 from mrslam_core.geometry.se2 import compose
 from mrslam_core.pipelines.mrclam import MrclamConfig
-from mrslam_core.slam.motion import STILL, predict_motion
+from mrslam_core.slam.motion import predict_motion, reports_motion
 
 HUBER_K = 1.345
 PRIOR_SIGMA = (1e-3, 1e-3, 1e-3)  # m, m, rad: start poses at ground truth
@@ -255,7 +255,7 @@ def odometry_covariance(delta: np.ndarray, dt: float, cfg: MrclamConfig) -> np.n
     model; here it is held to :data:`PRIOR_SIGMA`, as tight as the start poses, because iSAM2
     cannot factor a between-factor of zero covariance.
     """
-    if np.abs(delta).max() <= STILL:
+    if not reports_motion(delta):
         return np.diag(np.square(PRIOR_SIGMA))
     cov = predict_motion(np.zeros((1, 3)), delta, cfg.filter.motion, dt)[1][0]
     c, s = np.cos(delta[2]), np.sin(delta[2])

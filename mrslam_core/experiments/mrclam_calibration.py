@@ -38,7 +38,7 @@ from mrslam_core.experiments._output import write_tables
 from mrslam_core.geometry.se2 import between, wrap_angle
 from mrslam_core.pipelines.mrclam import MrclamConfig
 from mrslam_core.slam.config import MotionConfig
-from mrslam_core.slam.motion import STILL, predict_motion
+from mrslam_core.slam.motion import predict_motion, reports_motion
 
 #: readings further than this from the Vicon prediction are left out of the line fits [m], [rad]
 #: (misread barcodes and occluded views; the noise fit models them as outliers instead)
@@ -178,7 +178,7 @@ def fit_motion(odo: np.ndarray, true: np.ndarray, step: float, base: MotionConfi
         (the fitted config, mean negative log-likelihood per window).
     """
     ok = (np.hypot(*(true - odo)[:, :2].T) < 0.5) & (np.abs(wrap_angle(true[:, 2] - odo[:, 2])) < 0.5)
-    ok &= np.any(np.abs(odo) > STILL, axis=1)
+    ok &= reports_motion(odo)
     odo, true = odo[ok], true[ok]
     zero = np.zeros((1, 3))
 

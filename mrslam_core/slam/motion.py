@@ -12,6 +12,12 @@ from mrslam_core.slam.config import MotionConfig
 STILL = 1e-9
 
 
+def reports_motion(delta: np.ndarray) -> np.ndarray:
+    """Whether odometry deltas (..., 3) (dx [m], dy [m], dθ [rad]) report any motion: (...) bool,
+    True where a component exceeds :data:`STILL`. The random walk accrues only over these."""
+    return np.any(np.abs(np.asarray(delta, float)) > STILL, axis=-1)
+
+
 def decompose(delta: np.ndarray, min_translation: float = 0.0) -> tuple[float, float, float]:
     """Relative motion (dx, dy, dθ) in the previous base frame -> (rot1, trans, rot2).
 
@@ -53,7 +59,7 @@ def sample_motion(
     tr = trans + s_trans * noise[:, 1]
     r2 = rot2 + s_rot2 * noise[:, 2]
     step = np.stack([tr * np.cos(r1), tr * np.sin(r1), r1 + r2], axis=-1)
-    sd = np.sqrt(_walk_variance(cfg, trans, rot1 + rot2, dt))
+    sd = np.sqrt(_walk_variance(cfg, trans, rot1 + rot2, dt if reports_motion(delta) else 0.0))
     if sd.any():
         step += rng.standard_normal((m, 3)) * sd
     return compose(poses, step)
@@ -63,12 +69,12 @@ def _walk_variance(cfg: MotionConfig, trans: float, turn: float, dt: float) -> n
     """Variances (3,) of the noise added in the robot frame on top of the (rot1, trans, rot2)
     model: time random walk plus distance- and angle-proportional terms.
 
-    The random walk models how the executed motion departs from the reported one while the robot
-    moves; over an update whose odometry reports no motion at all it adds nothing (a
-    zero-velocity update), so a still robot's particles do not diffuse.
+    ``dt`` [s] is the time the robot moved: the random walk models how the executed motion departs
+    from the reported one while the robot moves, so the callers pass 0 for an update whose
+    odometry reports no motion (:func:`reports_motion`; a zero-velocity update).
     """
+    t = max(dt, 0.0)
     d, a = abs(trans), abs(float(wrap_angle(turn)))
-    t = max(dt, 0.0) if max(d, a) > STILL else 0.0
     var_xy = cfg.sigma_xy_rw**2 * t + cfg.var_xy_per_m * d
     return np.array([var_xy, var_xy, cfg.sigma_theta_rw**2 * t + cfg.var_theta_per_m * d + cfg.var_theta_per_rad * a])
 
@@ -103,5 +109,5 @@ def predict_motion(
     jac[:, 1, 1] = s
     jac[:, 2, 2] = 1.0
     cov = (jac * var[None, None, :]) @ np.swapaxes(jac, 1, 2)
-    cov += np.diag(_walk_variance(cfg, trans, rot1 + rot2, dt) + 1e-12)
+    cov += np.diag(_walk_variance(cfg, trans, rot1 + rot2, dt if reports_motion(delta) else 0.0) + 1e-12)
     return compose(poses, np.array([trans * np.cos(rot1), trans * np.sin(rot1), rot1 + rot2])), cov
