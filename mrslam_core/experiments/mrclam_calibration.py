@@ -1,13 +1,14 @@
 """``mrslam experiment mrclam_calibration DIR``: fit a MR.CLAM dataset's calibration and noise against Vicon.
 
 What the MR.CLAM profile's sensor and motion models are fitted from (docs/results.md), for any
-MR.CLAM dataset folder; all robots are pooled, because the calibration must hold for robots and
-datasets it was not fitted on:
+MR.CLAM dataset folder. The camera lines are per camera (each camera keeps its line over the
+run; all MR.CLAM datasets were recorded by the same five robots); everything else pools all
+robots, because it must hold for robots and datasets it was not fitted on:
 
 - the range reading (:class:`~mrslam_core.datasets.mrclam.MrclamCalibration`): reading =
   offset + scale · z with z = r·cos b the subject's depth along the optical axis, a Huber-weighted
-  line over every landmark reading; each robot's readings are also predicted by the fit of the
-  other robots (leave one robot out) and by its own fit, and both residual spreads printed;
+  line over each camera's landmark readings; each robot's readings are also predicted by the
+  pooled line of the other robots (leave one robot out), and both residual spreads printed;
 - the executed share of the commanded velocity and turn rate: least squares of the Vicon
   displacement and turn over 1 s against the logged ones;
 - the measurement noise: a contaminated normal (a Gaussian plus a uniform outlier density,
@@ -73,14 +74,18 @@ def contaminated_normal(e: np.ndarray, span: float, iterations: int = 200) -> tu
     return mu, sigma, eps
 
 
-def readings(ds: MrclamDataset, robot: int, robots: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """A robot's landmark (or, with ``robots``, robot) readings and their Vicon truth.
+def readings(ds: MrclamDataset, robot: int, robots: bool, span: tuple[float, float] | None = None
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """A robot's landmark (or, with ``robots``, robot) readings and their Vicon truth, all of
+    them or those in ``span`` = [start, end) [s].
 
     Returns:
         (reading (N,) [m], bearing read (N,) [rad], true distance (N,) [m], true bearing (N,) [rad]),
         from the robot's centre at the reading's time.
     """
     m = ds.robots[robot].measurements
+    if span is not None:
+        m = m[(m[:, 0] >= span[0]) & (m[:, 0] < span[1])]
     pose = ds.groundtruth(robot, m[:, 0])
     if robots:
         keep = m[:, 1] <= ds.num_robots
@@ -102,6 +107,15 @@ def _plausible(reading: np.ndarray, bearing: np.ndarray, r: np.ndarray, b: np.nd
     return (np.abs(reading - r * np.cos(b)) < GROSS_RANGE) & (np.abs(wrap_angle(bearing - b)) < GROSS_BEARING)
 
 
+def camera_line(rows: list[tuple]) -> tuple[np.ndarray, float]:
+    """The reading-vs-depth line through :func:`readings` ``rows`` (one per robot, pooled),
+    gross readings left out; returns ((offset [m], scale), robust residual σ [m])."""
+    ok = [_plausible(*row) for row in rows]
+    z = np.concatenate([(row[2] * np.cos(row[3]))[k] for row, k in zip(rows, ok)])
+    y = np.concatenate([row[0][k] for row, k in zip(rows, ok)])
+    return huber_line(z, y)
+
+
 def fit_range(data: dict[int, tuple]) -> tuple[tuple[float, float], dict[int, dict[str, float]]]:
     """The pooled reading-vs-depth line and, per robot, the residual σ under its own fit and
     under the fit of the other robots (leave one out).
@@ -112,11 +126,7 @@ def fit_range(data: dict[int, tuple]) -> tuple[tuple[float, float], dict[int, di
         ((offset [m], scale), {robot: {"own": σ, "others": σ, "distance": σ of reading − r}}) [m].
     """
     def line(robots):
-        rows = [data[i] for i in robots]
-        ok = [_plausible(*row) for row in rows]
-        z = np.concatenate([(row[2] * np.cos(row[3]))[k] for row, k in zip(rows, ok)])
-        y = np.concatenate([row[0][k] for row, k in zip(rows, ok)])
-        return huber_line(z, y)
+        return camera_line([data[i] for i in robots])
 
     (c0, c1), _ = line(list(data))
     per = {}
@@ -238,9 +248,11 @@ def unmeasured_floor(ds: MrclamDataset, delay: float, step: float) -> dict[int, 
 
 def calibrate(ds: MrclamDataset, cfg: MrclamConfig) -> dict:
     """Every fit of this module on one dataset (see the module docstring); plain numbers."""
-    (offset, scale), per_robot = fit_range({i: readings(ds, i, False) for i in ds.robots})
+    pooled, per_robot = fit_range({i: readings(ds, i, False) for i in ds.robots})
     v_scale, w_scale = fit_velocity_scales(ds, cfg.odometry_delay)
-    cal = MrclamCalibration(offset, scale, v_scale, w_scale)
+    cameras = [i for i in sorted(per_robot)]
+    cal = MrclamCalibration(tuple(round(per_robot[i]["own_offset"], 3) for i in cameras),
+                            tuple(round(per_robot[i]["own_scale"], 3) for i in cameras), v_scale, w_scale)
     calibrated = ds.calibrated(cal)
     noise = {}
     for kind, robots in (("landmark", False), ("sighting", True)):
@@ -249,7 +261,7 @@ def calibrate(ds: MrclamDataset, cfg: MrclamConfig) -> dict:
         eb = wrap_angle(np.concatenate([row[1] - row[3] for row in rows]))
         noise[kind] = {"range": contaminated_normal(er, 10.0), "bearing": contaminated_normal(eb, 2 * np.pi)}
     motion, nll = fit_motion(*motion_windows(calibrated, cfg.odometry_delay, cfg.team_step), cfg.team_step, cfg.filter.motion)
-    return {"calibration": asdict(cal), "per_robot": per_robot, "noise": noise,
+    return {"calibration": asdict(cal), "pooled_line": pooled, "per_robot": per_robot, "noise": noise,
             "motion": {n: getattr(motion, n) for n in MOTION_FIELDS}, "motion_nll": nll,
             "unmeasured": unmeasured_floor(calibrated, cfg.odometry_delay, cfg.team_step)}
 
@@ -265,8 +277,9 @@ def main(argv: list[str]) -> int:
     lines = [
         f"MR.CLAM {args.folder} against Vicon, all robots pooled",
         "",
-        f"reading = {cal['range_offset']:.3f} m + {cal['range_scale']:.3f} · depth; executed velocity "
-        f"{cal['velocity_scale']:.3f} × commanded, turn rate {cal['turn_rate_scale']:.3f} × commanded",
+        f"camera reading = offset + scale · depth, each camera on its own line (all cameras pooled: "
+        f"{fit['pooled_line'][0]:.3f} m + {fit['pooled_line'][1]:.3f} · depth); executed velocity "
+        f"{cal['velocity_scale']:.3f} × commanded, turn rate {cal['turn_rate_scale']:.3f} × commanded, all robots pooled",
         "",
         "| robot | σ of reading − distance [m] | σ under the other robots' line [m] | σ under its own line [m] | own offset [m] | own scale |",
         "|---|---|---|---|---|---|",
@@ -281,7 +294,8 @@ def main(argv: list[str]) -> int:
         f"motion noise over {cfg.team_step} s windows (maximum likelihood, mean NLL {fit['motion_nll']:.3f}):",
         "",
         "```yaml",
-        "calibration: {" + ", ".join(f"{k}: {v:.3f}" for k, v in cal.items()) + "}",
+        "calibration: {" + ", ".join(f"{k}: " + (f"[{', '.join(f'{x:.3f}' for x in v)}]" if isinstance(v, tuple) else f"{v:.3f}")
+                                     for k, v in cal.items()) + "}",
         f"sigma_range: {noise['landmark']['range'][1]:.3f}",
         f"sigma_bearing: {noise['landmark']['bearing'][1]:.4f}",
         f"sigma_sighting_range: {noise['sighting']['range'][1]:.3f}",

@@ -66,8 +66,8 @@ class MrclamConfig(CentralConfig):
             applied to the dataset before anything reads it.
         sigma_range: landmark range noise of calibrated readings [m]. This σ and the three
             below are those of a contaminated normal fitted to dataset 6's residuals against
-            Vicon, all robots pooled (``mrslam experiment mrclam_calibration``; outlier shares
-            0.1–0.5 %).
+            Vicon, each camera on its own line, all robots pooled (``mrslam experiment
+            mrclam_calibration``; outlier shares 0.3–0.6 %).
         sigma_bearing: landmark bearing noise [rad].
         sigma_sighting_range: range noise of robot-to-robot readings [m].
         sigma_sighting_bearing: bearing noise of robot-to-robot readings [rad].
@@ -88,9 +88,9 @@ class MrclamConfig(CentralConfig):
     map_check: MapCheckConfig = _from_profile("map_check")
     filter: FilterConfig = _from_profile("filter")
     calibration: MrclamCalibration = field(default_factory=MrclamCalibration)
-    sigma_range: float = 0.062
+    sigma_range: float = 0.042
     sigma_bearing: float = 0.012
-    sigma_sighting_range: float = 0.040
+    sigma_sighting_range: float = 0.026
     sigma_sighting_bearing: float = 0.011
     use_sightings: bool = True
     mode: Literal["joint", "independent"] = "joint"

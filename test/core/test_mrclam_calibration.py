@@ -7,6 +7,7 @@ import pytest
 
 from mrslam_core.datasets.mrclam import MrclamCalibration, MrclamDataset
 from mrslam_core.experiments.mrclam_calibration import (
+    camera_line,
     contaminated_normal,
     fit_motion,
     fit_range,
@@ -20,16 +21,22 @@ from mrslam_core.slam.config import MotionConfig
 from mrslam_core.slam.motion import predict_motion
 
 
-def test_a_depth_reading_becomes_the_distance():
-    cal = MrclamCalibration(range_offset=0.05, range_scale=1.02)
+def test_a_depth_reading_becomes_the_distance_on_each_cameras_line():
+    cal = MrclamCalibration(range_offset=(0.05, 0.0), range_scale=(1.02, 1.05))
     r = np.array([0.5, 2.0, 4.0])
     b = np.array([0.0, 0.3, -0.5])
-    reading = 0.05 + 1.02 * r * np.cos(b)
-    np.testing.assert_allclose(cal.range_of(reading, b), r, rtol=0, atol=1e-12)
-    # identity: only the depth-to-distance step, 3 m read at 0.3 rad is 0.134 m short
-    assert MrclamCalibration(0.0, 1.0, 1.0, 1.0).range_of(3.0, 0.3) - 3.0 == pytest.approx(3.0 / np.cos(0.3) - 3.0)
+    np.testing.assert_allclose(cal.range_of(0.05 + 1.02 * r * np.cos(b), b, 1), r, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(cal.range_of(1.05 * r * np.cos(b), b, 2), r, rtol=0, atol=1e-12)
+    # one line for every camera; identity: only the depth-to-distance step, 3 m read at 0.3 rad is 0.134 m short
+    one = MrclamCalibration(0.0, 1.0, 1.0, 1.0)
+    assert one.line(4) == (0.0, 1.0)
+    assert one.range_of(3.0, 0.3, 4) - 3.0 == pytest.approx(3.0 / np.cos(0.3) - 3.0)
+    with pytest.raises(ValueError, match="range_offset holds 2 cameras, no line for robot 3"):
+        cal.range_of(1.0, 0.0, 3)
     with pytest.raises(ValueError, match="must be > 0"):
         MrclamCalibration(range_scale=0.0)
+    with pytest.raises(ValueError, match="range_scale must hold one value per camera"):
+        MrclamCalibration(range_scale=())
 
 
 def test_calibrated_dataset_converts_readings_and_velocities(mrclam6):
@@ -38,8 +45,9 @@ def test_calibrated_dataset_converts_readings_and_velocities(mrclam6):
     out = ds.calibrated(cal)
     for i, log in ds.robots.items():
         m, c = log.measurements, out.robots[i].measurements
+        offset, scale = cal.range_offset[i - 1], cal.range_scale[i - 1]
         np.testing.assert_array_equal(c[:, [0, 1, 3]], m[:, [0, 1, 3]])
-        np.testing.assert_allclose(c[:, 2], (m[:, 2] - cal.range_offset) / (cal.range_scale * np.cos(m[:, 3])))
+        np.testing.assert_allclose(c[:, 2], (m[:, 2] - offset) / (scale * np.cos(m[:, 3])))
         np.testing.assert_allclose(out.robots[i].odometry[:, 1:], log.odometry[:, 1:] * [cal.velocity_scale, cal.turn_rate_scale])
         assert out.robots[i].groundtruth is log.groundtruth
     assert not np.shares_memory(out.robots[1].measurements, ds.robots[1].measurements)
@@ -72,19 +80,29 @@ def test_motion_fit_recovers_the_noise_it_was_drawn_from():
     assert fitted.alpha3 == pytest.approx(0.02, rel=0.2)
 
 
-def test_dataset6_calibration_is_the_profile_and_holds_for_robots_it_was_not_fitted_on(mrclam6):
-    """The shipped defaults are what `mrslam experiment mrclam_calibration` fits on dataset 6,
-    and each robot's readings are predicted by the other four robots' line about as well as by
-    its own (the line is the camera model, not a robot's)."""
+def test_dataset6_calibration_is_the_profile_and_each_camera_keeps_its_line(mrclam6):
+    """The shipped defaults are what `mrslam experiment mrclam_calibration` fits on dataset 6.
+    Each camera's line is a property of the camera: fitted to the first, middle and last third of
+    the run it stays within 0.01 in scale, while robot 2's camera reads 2.9 % longer than the
+    others' pooled line. The pooled line still predicts each camera within 0.065 m (against
+    0.08-0.18 m for the readings taken as distances)."""
     ds = MrclamDataset(mrclam6)
-    (offset, scale), per = fit_range({i: readings(ds, i, False) for i in ds.robots})
+    _, per = fit_range({i: readings(ds, i, False) for i in ds.robots})
     v_scale, w_scale = fit_velocity_scales(ds, 0.25)
     shipped = MrclamCalibration()
-    assert (round(offset, 3), round(scale, 3)) == (shipped.range_offset, shipped.range_scale)
+    assert shipped.range_offset == tuple(round(per[i]["own_offset"], 3) for i in sorted(per))
+    assert shipped.range_scale == tuple(round(per[i]["own_scale"], 3) for i in sorted(per))
     assert (round(v_scale, 3), round(w_scale, 3)) == (shipped.velocity_scale, shipped.turn_rate_scale)
     for i, p in per.items():
-        assert p["others"] < 0.065, (i, p)  # against 0.08-0.18 m read as distances
+        assert p["others"] < 0.065, (i, p)
         assert p["others"] < p["distance"] / 2, (i, p)
+        assert p["own"] <= p["others"] + 1e-3, (i, p)
+    assert per[2]["others"] > 2 * per[2]["own"]  # robot 2: 0.062 m against 0.026 m
+    t0, t1 = ds.time_span()
+    cut = t0 + (t1 - t0) * np.arange(4) / 3
+    for i in ds.robots:
+        thirds = [camera_line([readings(ds, i, False, (cut[k], cut[k + 1]))])[0][1] for k in range(3)]
+        assert max(thirds) - min(thirds) < 0.01, (i, thirds)
 
 
 def test_robot4s_unseen_stretch_sets_a_floor_no_causal_estimator_beats(mrclam6):
