@@ -275,7 +275,7 @@ def main(argv: list[str]) -> int:
     fit = calibrate(MrclamDataset(args.folder), cfg)
     cal, noise, motion = fit["calibration"], fit["noise"], fit["motion"]
     lines = [
-        f"MR.CLAM {args.folder} against Vicon, all robots pooled",
+        f"MR.CLAM {args.folder} against Vicon",
         "",
         f"camera reading = offset + scale · depth, each camera on its own line (all cameras pooled: "
         f"{fit['pooled_line'][0]:.3f} m + {fit['pooled_line'][1]:.3f} · depth); executed velocity "
