@@ -205,13 +205,16 @@ class FilterConfig:
         defer_motion_noise: while a robot has no measurement (no landmark, no robot-to-robot
             reading involving it), move its poses by the noise-free odometry and accumulate the
             motion noise in a per-robot covariance instead of sampling it every step; the
-            accumulated noise is drawn when the robot next has a measurement (as the prior of
-            the FastSLAM 2.0 proposal, or by sampling before a FastSLAM 1.0 or robot-to-robot
-            update). No measurement depends on those intermediate poses, so this is the same
-            model with the noise marginalised (linearised); it stops the weights of the OTHER
-            robots, through resampling, from selecting the unobserved robot's random motion
-            noise (its weighted mean then drifts away from odometry by tens of degrees on
-            MR.CLAM robot 4 while it sees nothing for 80 s).
+            accumulated noise is drawn when the robot next has a landmark measurement (as the
+            prior of the FastSLAM 2.0 proposal, or by sampling before a FastSLAM 1.0 update);
+            a robot-to-robot reading is scored by its marginal under both robots' pending
+            covariances and conditions them (an EKF update) without drawing them. No
+            measurement depends on those intermediate poses, so this is the same model with
+            the noise marginalised (linearised); it stops the weights of the OTHER robots,
+            through resampling, from selecting the unobserved robot's random motion noise (its
+            weighted mean then drifts away from odometry by tens of degrees on MR.CLAM robot 4
+            while it sees nothing for 80 s), and a sighting, which measures where a robot is
+            and not where it heads, from leaving its heading to chance.
     """
 
     num_particles: int = 200

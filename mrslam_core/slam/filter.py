@@ -787,6 +787,9 @@ class MultiRobotFastSLAM:
         ).all():
             self.dropped["bad_sighting"] += 1
             return
+        if self.config.defer_motion_noise:
+            log_l += self._sighting_marginal(k, target, z, cov, log_l)
+            return
         self._draw_pending(k)
         self._draw_pending(target)
         rb = RangeBearingModel()
@@ -798,6 +801,51 @@ class MultiRobotFastSLAM:
         if eps > 0:
             ll = np.logaddexp(np.log1p(-eps) + ll, np.log(eps) - np.log(10.0 * 2 * np.pi))
         log_l += ll
+
+    def _sighting_marginal(self, k: int, target: int, z: np.ndarray, cov: np.ndarray, log_l: np.ndarray) -> np.ndarray:
+        """A sighting of robot ``target`` by robot ``k`` against their poses with the motion
+        noise still pending (``defer_motion_noise``): each particle's two poses are Gaussians
+        N(x, P) with the robots' pending covariances P. The sighting is scored by its marginal
+        likelihood N(ν; 0, R + Σ H P Hᵀ), linearised at the particle's poses, and conditions
+        each Gaussian (an EKF update of the means, weighted by the reading's inlier
+        probability under ``sighting_outlier_probability``) instead of sampling the noise
+        first: a sighting measures where a robot is, not where it heads, and a drawn heading
+        that nothing selects would be kept or lost at the next resampling by chance.
+        The pending covariances shrink by the posterior-weighted mean of K S Kᵀ; the
+        correlation the sighting makes between the two robots is not kept.
+
+        Returns:
+            (M,) log-likelihood of the sighting per particle.
+        """
+        rb = RangeBearingModel()
+        m = self.num_particles
+        zhat, g = rb.predict(self.poses[:, k], self.poses[:, target, :2])
+        nu = rb.innovation(z[None], zhat)
+        jac = {k: rb.pose_jacobian(self.poses[:, k], self.poses[:, target, :2]),
+               target: np.concatenate([g, np.zeros((m, 2, 1))], axis=2)}
+        pending = {r: self.pending_cov[r] for r in (k, target) if r in self.pending_cov}
+        s = np.broadcast_to(cov, (m, 2, 2)).copy()
+        for r, p in pending.items():
+            s += jac[r] @ p @ np.swapaxes(jac[r], 1, 2)
+        inv, det = sym_inv_det(s)
+        ll_in = -0.5 * (quad_form(nu, inv) + 2 * LOG_2PI + np.log(det))
+        eps = self.config.sighting_outlier_probability
+        ll = ll_in
+        inlier = np.ones(m)
+        if eps > 0:
+            ll = np.logaddexp(np.log1p(-eps) + ll_in, np.log(eps) - np.log(10.0 * 2 * np.pi))
+            inlier = np.exp(np.log1p(-eps) + ll_in - ll)
+        post = self.log_w + log_l + ll  # the particles' weights with this update's terms so far
+        post = np.exp(post - post.max())
+        post /= post.sum()
+        for r, p in pending.items():
+            gain = p @ np.swapaxes(jac[r], 1, 2) @ inv  # (M, 3, 2)
+            self.poses[:, r] += inlier[:, None] * (gain @ nu[..., None])[..., 0]
+            self.poses[:, r, 2] = wrap_angle(self.poses[:, r, 2])
+            shrink = np.einsum("m,mij->ij", post * inlier, gain @ s @ np.swapaxes(gain, 1, 2))
+            p = p - shrink
+            self.pending_cov[r] = 0.5 * (p + p.T)
+        return ll
 
     def _resample(self) -> None:
         index = low_variance_indices(self.log_w, self.rng)

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from mrslam_core.datasets.synthetic import SyntheticWorld, SyntheticWorldConfig
-from mrslam_core.slam.config import AssociationConfig, ExistenceConfig, FilterConfig, RelocalizationConfig
+from mrslam_core.slam.config import AssociationConfig, ExistenceConfig, FilterConfig, MotionConfig, RelocalizationConfig
 from mrslam_core.slam.filter import FilterInputError, MultiRobotFastSLAM, RobotUpdate
 from mrslam_core.types import ObservationSet, RobotSighting
 
@@ -329,12 +329,13 @@ def test_deferred_motion_noise_follows_odometry_until_measured():
     # heading random walk 0.05²·1 s; carried through the motion it adds lateral (y) variance
     assert pending[2, 2] > 0.0025 and pending[1, 1] > pending[0, 0] + 3e-4
     np.testing.assert_allclose(slam.estimate().cov[0], pending, atol=1e-12)  # reported uncertainty
-    # a sighting draws the pending noise once, then scores the particles
+    # a sighting conditions the pending noise (its range measures x here, its bearing y) and
+    # draws nothing: the particles stay identical
     cov = np.diag([0.01, 0.001])
     slam.step([RobotUpdate("b", 11 * 10**8, np.zeros(3), sightings=[RobotSighting("b", "a", np.array([1.0, np.pi]), cov)])])
-    assert 0 not in slam.pending_cov
-    spread = slam.poses[:, 0, :2].std(axis=0)
-    assert np.all(spread > 0.01)
+    after = slam.pending_cov[0]
+    assert after[0, 0] < 0.8 * pending[0, 0] and after[1, 1] < 0.5 * pending[1, 1]
+    assert np.ptp(slam.poses[:, 0], axis=0).max() < 1e-12
 
 
 def _means(slam):
@@ -380,3 +381,35 @@ def test_a_look_alike_match_is_left_out_of_the_proposal_and_the_map():
     plain, _ = _look_alike_run(0.0)  # without the gate the six pairs pull the pose −0.12/6 m in y
     assert plain.outlier_pairs == 0
     assert plain.poses[:, 0, 1].mean() < -0.015, plain.poses[:, 0].mean(axis=0)
+
+
+def test_a_sighting_conditions_the_pending_motion_noise_instead_of_sampling_it():
+    """With the motion noise deferred, a sighting of robot b is scored by its marginal
+    N(ν; 0, R + H P Hᵀ) under b's pending covariance P and moves b's pose by the EKF gain: the
+    particles, identical before, stay identical (nothing is sampled), b's heading, which a
+    range and a bearing of its position do not measure, is not moved, and P shrinks by K S Kᵀ."""
+    cfg = FilterConfig(num_particles=20, seed=1, initial_pose_sigma=(0.0, 0.0, 0.0), observation_model="range_bearing",
+                       motion=MotionConfig(alpha1=0.0, alpha2=0.0, alpha3=0.0, alpha4=0.0, sigma_xy_rw=0.1, sigma_theta_rw=0.1),
+                       defer_motion_noise=True, sighting_outlier_probability=0.0)
+    slam = MultiRobotFastSLAM(cfg, ["a", "b"], np.array([[0.0, 0, 0], [2.0, 0, 0]]))
+    slam.step([RobotUpdate("b", 1, np.zeros(3))])
+    slam.step([RobotUpdate("b", 10**9 + 1, np.array([1e-6, 0.0, 0.0]))])  # b moves: 1 s of random walk
+    p = slam.pending_cov[1].copy()
+    np.testing.assert_allclose(p, np.diag([0.01, 0.01, 0.01]), atol=1e-9)
+    b = slam.poses[0, 1].copy()
+    z, r = np.array([2.1, 0.05]), np.diag([0.01, 0.001])
+    before = slam.log_w.copy()
+    slam.step([RobotUpdate("a", 10**9, np.zeros(3), sightings=[RobotSighting("a", "b", z, r)])])
+    # the exact linear-Gaussian answer at b's pose (a at the origin, heading 0)
+    d = b[:2]
+    q = d @ d
+    h = np.array([[d[0] / np.sqrt(q), d[1] / np.sqrt(q), 0.0], [-d[1] / q, d[0] / q, 0.0]])
+    nu = z - [np.sqrt(q), np.arctan2(d[1], d[0])]
+    s = r + h @ p @ h.T
+    k = p @ h.T @ np.linalg.inv(s)
+    np.testing.assert_allclose(slam.poses[:, 1], np.broadcast_to(b + k @ nu, (20, 3)), atol=1e-12)
+    assert slam.poses[0, 1, 2] == b[2]
+    np.testing.assert_allclose(slam.pending_cov[1], p - k @ s @ k.T, atol=1e-12)
+    ll = -0.5 * (nu @ np.linalg.solve(s, nu) + 2 * np.log(2 * np.pi) + np.log(np.linalg.det(s)))
+    assert slam.log_w == pytest.approx(before)  # every particle the same: weights unchanged
+    assert slam.score[0] == pytest.approx(ll)
