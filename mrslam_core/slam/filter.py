@@ -796,11 +796,17 @@ class MultiRobotFastSLAM:
         zhat, _ = rb.predict(self.poses[:, k], self.poses[:, target, :2])
         nu = rb.innovation(z[None], zhat)
         inv, det = sym_inv_det(cov)
-        ll = -0.5 * (quad_form(nu, inv[None]) + 2 * LOG_2PI + np.log(det))
+        log_l += self._robust_sighting(-0.5 * (quad_form(nu, inv[None]) + 2 * LOG_2PI + np.log(det)))[0]
+
+    def _robust_sighting(self, ll_in: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(log-likelihood (M,), inlier probability (M,)) of a sighting whose Gaussian
+        log-likelihood is ``ll_in``, under the outlier mixture (1 − ε)·N + ε·U with U uniform over
+        range 0–10 m and bearing ±π (``sighting_outlier_probability`` ε)."""
         eps = self.config.sighting_outlier_probability
-        if eps > 0:
-            ll = np.logaddexp(np.log1p(-eps) + ll, np.log(eps) - np.log(10.0 * 2 * np.pi))
-        log_l += ll
+        if eps <= 0:
+            return ll_in, np.ones_like(ll_in)
+        ll = np.logaddexp(np.log1p(-eps) + ll_in, np.log(eps) - np.log(10.0 * 2 * np.pi))
+        return ll, np.exp(np.log1p(-eps) + ll_in - ll)
 
     def _sighting_marginal(self, k: int, target: int, z: np.ndarray, cov: np.ndarray, log_l: np.ndarray) -> np.ndarray:
         """A sighting of robot ``target`` by robot ``k`` against their poses with the motion
@@ -828,13 +834,7 @@ class MultiRobotFastSLAM:
         for r, p in pending.items():
             s += jac[r] @ p @ np.swapaxes(jac[r], 1, 2)
         inv, det = sym_inv_det(s)
-        ll_in = -0.5 * (quad_form(nu, inv) + 2 * LOG_2PI + np.log(det))
-        eps = self.config.sighting_outlier_probability
-        ll = ll_in
-        inlier = np.ones(m)
-        if eps > 0:
-            ll = np.logaddexp(np.log1p(-eps) + ll_in, np.log(eps) - np.log(10.0 * 2 * np.pi))
-            inlier = np.exp(np.log1p(-eps) + ll_in - ll)
+        ll, inlier = self._robust_sighting(-0.5 * (quad_form(nu, inv) + 2 * LOG_2PI + np.log(det)))
         post = self.log_w + log_l + ll  # the particles' weights with this update's terms so far
         post = np.exp(post - post.max())
         post /= post.sum()
