@@ -61,7 +61,7 @@ class MrclamCalibration:
     residual σ under the other four's line, 0.026 m under its own). The executed velocity
     shares are pooled over all robots: one robot's share changes by up to 7 % from one half of
     the run to the other, more than the robots differ. All nine MR.CLAM datasets were recorded
-    by the same five robots (robot i carries barcode i in each). Identity: offset 0, scales 1.
+    by the same five robots (the ASRL dataset page). Identity: offset 0, scales 1.
 
     Attributes:
         range_offset: reading at zero depth [m], per camera (robot 1 first) or one for all.
