@@ -9,6 +9,9 @@ robots, because it must hold for robots and datasets it was not fitted on:
   offset + scale · z with z = r·cos b the subject's depth along the optical axis, a Huber-weighted
   line over each camera's landmark readings; each robot's readings are also predicted by the
   pooled line of the other robots (leave one robot out), and both residual spreads printed;
+- each camera's bearing offset (its yaw on the robot): the median of read minus true bearing
+  over its landmark readings within the robots' common Vicon span, with its readings of
+  robots printed beside as a check;
 - the executed share of the commanded velocity and turn rate: least squares of the Vicon
   displacement and turn over 1 s against the logged ones;
 - the measurement noise: a contaminated normal (a Gaussian plus a uniform outlier density,
@@ -114,6 +117,13 @@ def camera_line(rows: list[tuple]) -> tuple[np.ndarray, float]:
     z = np.concatenate([(row[2] * np.cos(row[3]))[k] for row, k in zip(rows, ok)])
     y = np.concatenate([row[0][k] for row, k in zip(rows, ok)])
     return huber_line(z, y)
+
+
+def bearing_offset(rows: list[tuple]) -> float:
+    """Read minus true bearing [rad], the median over :func:`readings` ``rows`` (pooled), gross
+    readings left out: the camera's yaw on the robot."""
+    e = np.concatenate([wrap_angle(row[1] - row[3])[_plausible(*row)] for row in rows])
+    return float(np.median(e))
 
 
 def fit_range(data: dict[int, tuple]) -> tuple[tuple[float, float], dict[int, dict[str, float]]]:
@@ -251,8 +261,13 @@ def calibrate(ds: MrclamDataset, cfg: MrclamConfig) -> dict:
     pooled, per_robot = fit_range({i: readings(ds, i, False) for i in ds.robots})
     v_scale, w_scale = fit_velocity_scales(ds, cfg.odometry_delay)
     cameras = [i for i in sorted(per_robot)]
+    span = ds.time_span()  # where every robot's Vicon pose is measured, not held at an end
+    for i in cameras:
+        per_robot[i]["bearing_offset"] = bearing_offset([readings(ds, i, False, span)])
+        per_robot[i]["sighting_bearing_offset"] = bearing_offset([readings(ds, i, True, span)])
     cal = MrclamCalibration(tuple(round(per_robot[i]["own_offset"], 3) for i in cameras),
-                            tuple(round(per_robot[i]["own_scale"], 3) for i in cameras), v_scale, w_scale)
+                            tuple(round(per_robot[i]["own_scale"], 3) for i in cameras),
+                            tuple(round(per_robot[i]["bearing_offset"], 4) for i in cameras), v_scale, w_scale)
     calibrated = ds.calibrated(cal)
     noise = {}
     for kind, robots in (("landmark", False), ("sighting", True)):
@@ -281,9 +296,10 @@ def main(argv: list[str]) -> int:
         f"{fit['pooled_line'][0]:.3f} m + {fit['pooled_line'][1]:.3f} · depth); executed velocity "
         f"{cal['velocity_scale']:.3f} × commanded, turn rate {cal['turn_rate_scale']:.3f} × commanded, all robots pooled",
         "",
-        "| robot | σ of reading − distance [m] | σ under the other robots' line [m] | σ under its own line [m] | own offset [m] | own scale |",
-        "|---|---|---|---|---|---|",
-        *(f"| robot{i} | {p['distance']:.3f} | {p['others']:.3f} | {p['own']:.3f} | {p['own_offset']:+.3f} | {p['own_scale']:.3f} |"
+        "| robot | σ of reading − distance [m] | σ under the other robots' line [m] | σ under its own line [m] | own offset [m] | own scale | bearing offset, landmarks / robots [°] |",
+        "|---|---|---|---|---|---|---|",
+        *(f"| robot{i} | {p['distance']:.3f} | {p['others']:.3f} | {p['own']:.3f} | {p['own_offset']:+.3f} | {p['own_scale']:.3f} | "
+          f"{np.degrees(p['bearing_offset']):+.2f} / {np.degrees(p['sighting_bearing_offset']):+.2f} |"
           for i, p in fit["per_robot"].items()),
         "",
         "| readings (calibrated) | range μ, σ [m], ε | bearing μ, σ [rad], ε |",

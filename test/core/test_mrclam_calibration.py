@@ -7,6 +7,7 @@ import pytest
 
 from mrslam_core.datasets.mrclam import MrclamCalibration, MrclamDataset
 from mrslam_core.experiments.mrclam_calibration import (
+    bearing_offset,
     camera_line,
     contaminated_normal,
     fit_motion,
@@ -28,10 +29,13 @@ def test_a_depth_reading_becomes_the_distance_on_each_cameras_line():
     np.testing.assert_allclose(cal.range_of(0.05 + 1.02 * r * np.cos(b), b, 1), r, rtol=0, atol=1e-12)
     np.testing.assert_allclose(cal.range_of(1.05 * r * np.cos(b), b, 2), r, rtol=0, atol=1e-12)
     # one line for every camera; identity: only the depth-to-distance step, 3 m read at 0.3 rad is 0.134 m short
-    one = MrclamCalibration(0.0, 1.0, 1.0, 1.0)
+    one = MrclamCalibration(0.0, 1.0, 0.0, 1.0, 1.0)
     assert one.line(4) == (0.0, 1.0)
     assert one.range_of(3.0, 0.3, 4) - 3.0 == pytest.approx(3.0 / np.cos(0.3) - 3.0)
-    with pytest.raises(ValueError, match="range_offset holds 2 cameras, no line for robot 3"):
+    # a camera's yaw: its bearings are read that much to the left
+    tilted = MrclamCalibration(bearing_offset=(0.01, -0.02))
+    assert tilted.bearing_of(0.31, 1) == pytest.approx(0.30) and tilted.bearing_of(0.31, 2) == pytest.approx(0.33)
+    with pytest.raises(ValueError, match="range_offset holds 2 cameras, no value for robot 3"):
         cal.range_of(1.0, 0.0, 3)
     with pytest.raises(ValueError, match="must be > 0"):
         MrclamCalibration(range_scale=0.0)
@@ -46,8 +50,9 @@ def test_calibrated_dataset_converts_readings_and_velocities(mrclam6):
     for i, log in ds.robots.items():
         m, c = log.measurements, out.robots[i].measurements
         offset, scale = cal.range_offset[i - 1], cal.range_scale[i - 1]
-        np.testing.assert_array_equal(c[:, [0, 1, 3]], m[:, [0, 1, 3]])
-        np.testing.assert_allclose(c[:, 2], (m[:, 2] - offset) / (scale * np.cos(m[:, 3])))
+        np.testing.assert_array_equal(c[:, [0, 1]], m[:, [0, 1]])
+        np.testing.assert_allclose(c[:, 3], m[:, 3] - cal.bearing_offset[i - 1], atol=1e-12)
+        np.testing.assert_allclose(c[:, 2], (m[:, 2] - offset) / (scale * np.cos(c[:, 3])))
         np.testing.assert_allclose(out.robots[i].odometry[:, 1:], log.odometry[:, 1:] * [cal.velocity_scale, cal.turn_rate_scale])
         assert out.robots[i].groundtruth is log.groundtruth
     assert not np.shares_memory(out.robots[1].measurements, ds.robots[1].measurements)
@@ -92,6 +97,13 @@ def test_dataset6_calibration_is_the_profile_and_each_camera_keeps_its_line(mrcl
     shipped = MrclamCalibration()
     assert shipped.range_offset == tuple(round(per[i]["own_offset"], 3) for i in sorted(per))
     assert shipped.range_scale == tuple(round(per[i]["own_scale"], 3) for i in sorted(per))
+    span = ds.time_span()
+    yaw = {i: bearing_offset([readings(ds, i, False, span)]) for i in ds.robots}
+    # the shipped offsets (those the results were measured with) are the fit within 0.01°
+    np.testing.assert_allclose(shipped.bearing_offset, [yaw[i] for i in sorted(yaw)], rtol=0, atol=2e-4)
+    # robot 4's camera is turned by -0.77°; its readings of the other robots say -0.60°
+    assert abs(np.degrees(yaw[4]) + 0.77) < 0.05
+    assert abs(np.degrees(bearing_offset([readings(ds, 4, True, span)]) - yaw[4])) < 0.2
     assert (round(v_scale, 3), round(w_scale, 3)) == (shipped.velocity_scale, shipped.turn_rate_scale)
     for i, p in per.items():
         assert p["others"] < 0.065, (i, p)
@@ -103,6 +115,8 @@ def test_dataset6_calibration_is_the_profile_and_each_camera_keeps_its_line(mrcl
     for i in ds.robots:
         thirds = [camera_line([readings(ds, i, False, (cut[k], cut[k + 1]))])[0][1] for k in range(3)]
         assert max(thirds) - min(thirds) < 0.01, (i, thirds)
+        yaws = np.degrees([bearing_offset([readings(ds, i, False, (cut[k], cut[k + 1]))]) for k in range(3)])
+        assert max(yaws) - min(yaws) < 0.6, (i, yaws)
 
 
 def test_robot4s_unseen_stretch_sets_a_floor_no_causal_estimator_beats(mrclam6):
