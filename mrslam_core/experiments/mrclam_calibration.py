@@ -281,6 +281,13 @@ def calibrate(ds: MrclamDataset, cfg: MrclamConfig) -> dict:
             "unmeasured": unmeasured_floor(calibrated, cfg.odometry_delay, cfg.team_step)}
 
 
+def _yaml_number(key: str, value: float | tuple[float, ...]) -> str:
+    digits = 4 if key == "bearing_offset" else 3  # radians need the fourth decimal
+    if isinstance(value, tuple):
+        return "[" + ", ".join(f"{x:.{digits}f}" for x in value) + "]"
+    return f"{value:.{digits}f}"
+
+
 def main(argv: list[str]) -> int:
     ap = argparse.ArgumentParser(prog="mrslam experiment mrclam_calibration", description=__doc__)
     ap.add_argument("folder", help="MR.CLAM dataset folder, e.g. ../shared/data/mrclam/dataset6")
@@ -310,8 +317,7 @@ def main(argv: list[str]) -> int:
         f"motion noise over {cfg.team_step} s windows (maximum likelihood, mean NLL {fit['motion_nll']:.3f}):",
         "",
         "```yaml",
-        "calibration: {" + ", ".join(f"{k}: " + (f"[{', '.join(f'{x:.3f}' for x in v)}]" if isinstance(v, tuple) else f"{v:.3f}")
-                                     for k, v in cal.items()) + "}",
+        "calibration: {" + ", ".join(f"{k}: {_yaml_number(k, v)}" for k, v in cal.items()) + "}",
         f"sigma_range: {noise['landmark']['range'][1]:.3f}",
         f"sigma_bearing: {noise['landmark']['bearing'][1]:.4f}",
         f"sigma_sighting_range: {noise['sighting']['range'][1]:.3f}",
