@@ -68,8 +68,8 @@ class MrclamConfig(CentralConfig):
             below are those of a contaminated normal fitted to dataset 6's residuals against
             Vicon, each camera on its own line, all robots pooled (``mrslam experiment
             mrclam_calibration``; outlier shares 0.3–0.6 %); the bearing σ are those fitted
-            before the cameras' bearing offsets (under them: 0.0108 and 0.0102 rad, not
-            measured in the filter yet).
+            before the cameras' bearing offsets (under them: 0.0108 and 0.0102 rad, measured
+            and not adopted: robot 4 worse, docs/results.md).
         sigma_bearing: landmark bearing noise [rad].
         sigma_sighting_range: range noise of robot-to-robot readings [m].
         sigma_sighting_bearing: bearing noise of robot-to-robot readings [rad].
