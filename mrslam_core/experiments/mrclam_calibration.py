@@ -260,7 +260,7 @@ def calibrate(ds: MrclamDataset, cfg: MrclamConfig) -> dict:
     """Every fit of this module on one dataset (see the module docstring); plain numbers."""
     pooled, per_robot = fit_range({i: readings(ds, i, False) for i in ds.robots})
     v_scale, w_scale = fit_velocity_scales(ds, cfg.odometry_delay)
-    cameras = [i for i in sorted(per_robot)]
+    cameras = sorted(per_robot)
     span = ds.time_span()  # where every robot's Vicon pose is measured, not held at an end
     for i in cameras:
         per_robot[i]["bearing_offset"] = bearing_offset([readings(ds, i, False, span)])

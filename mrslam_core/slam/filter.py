@@ -835,6 +835,8 @@ class MultiRobotFastSLAM:
             s += jac[r] @ p @ np.swapaxes(jac[r], 1, 2)
         inv, det = sym_inv_det(s)
         ll, inlier = self._robust_sighting(-0.5 * (quad_form(nu, inv) + 2 * LOG_2PI + np.log(det)))
+        if not pending:  # both robots' noise already drawn: the reading only weighs
+            return ll
         post = self.log_w + log_l + ll  # the particles' weights with this update's terms so far
         post = np.exp(post - post.max())
         post /= post.sum()
