@@ -22,6 +22,13 @@ factor graph over all robots:
   (so ATE is unaligned, as for the filter); no landmark ground truth: a landmark's initial value
   comes from its first sighting from the dead-reckoned pose.
 
+``--known 1`` keeps the prior on robot 1's start pose only, as ``mrslam experiment fusion_mrclam``
+knows it: the other robots' frames then come from the measurements alone, and the batch solution
+is the best any estimator can make of the same data with that one start pose. Their dead
+reckoning (the initial estimate) still begins at the true start poses, so that Levenberg–Marquardt
+finds the minimum nearest the truth: the smoother's best case. iSAM2 is not run then (a robot
+without a prior has no estimate until measurements link it).
+
 Solved (a) in batch by Levenberg–Marquardt from dead reckoning and (b) online by iSAM2, with the
 factors of each pose time added in one update (``--isam-every`` groups several pose times per
 update); the online estimate of a pose is iSAM2's estimate right after the update that added it —
@@ -44,6 +51,7 @@ import numpy as np
 from mrslam_core.datasets.mrclam import MrclamDataset, OdometryIntegrator
 from mrslam_core.evaluation.metrics import ate_rmse
 from mrslam_core.experiments._output import write_tables
+from mrslam_core.experiments.fusion_mrclam import gauge_free
 from mrslam_core.geometry.se2 import compose
 from mrslam_core.pipelines.mrclam import MrclamConfig
 from mrslam_core.slam.motion import predict_motion, reports_motion
@@ -102,13 +110,15 @@ def build_graph(
     landmark_cov: np.ndarray,
     sighting_cov: np.ndarray,
     huber_k: float | None = HUBER_K,
+    known: np.ndarray | None = None,
 ) -> GraphSteps:
     """The factor graph, split by pose time.
 
     Args:
         pose_times: (N,) [s], shared by all robots.
         robot_ids: the R robots' subject numbers (a measured subject among them is a sighting).
-        starts: (R, 3) start poses (map frame, x [m], y [m], θ [rad]), tight priors.
+        starts: (R, 3) start poses (map frame, x [m], y [m], θ [rad]): tight priors on the known
+            ones; every robot's dead reckoning (the initial estimate) starts there.
         odometry: (R, N−1, 3) relative motion from pose k to k+1 in pose k's frame.
         odometry_cov: (R, N−1, 3, 3) its covariance in GTSAM's Pose2 tangent order (x, y, θ) of
             the between error (the frame of pose k+1).
@@ -116,6 +126,9 @@ def build_graph(
             expressed from the robot's pose at the nearest pose time.
         landmark_cov, sighting_cov: (2, 2) noise of (bearing [rad], range [m]).
         huber_k: Huber threshold of the measurement loss; None for a plain Gaussian.
+        known: (R,) bool, the robots whose start pose is a prior (default all). The others' start
+            poses are only where their initial estimate begins: their frame comes from the
+            measurements that link them to the known robots.
     """
     import gtsam
 
@@ -139,9 +152,11 @@ def build_graph(
     prior = gtsam.noiseModel.Diagonal.Sigmas(np.array(PRIOR_SIGMA))
     factors = [gtsam.NonlinearFactorGraph() for _ in range(n)]
     values = [gtsam.Values() for _ in range(n)]
+    known = np.ones(n_r, bool) if known is None else np.asarray(known, bool)
     for r in range(n_r):
         values[0].insert(int(pose_keys[r, 0]), gtsam.Pose2(*starts[r]))
-        factors[0].add(gtsam.PriorFactorPose2(int(pose_keys[r, 0]), gtsam.Pose2(*starts[r]), prior))
+        if known[r]:
+            factors[0].add(gtsam.PriorFactorPose2(int(pose_keys[r, 0]), gtsam.Pose2(*starts[r]), prior))
         for k in range(1, n):
             values[k].insert(int(pose_keys[r, k]), gtsam.Pose2(*initial[r, k]))
             factors[k].add(gtsam.BetweenFactorPose2(
@@ -305,6 +320,15 @@ def _ate_row(poses: np.ndarray, gt: np.ndarray) -> list[float]:
     return [ate_rmse(p, g) for p, g in zip(poses, gt)]
 
 
+def _team_frame(poses: np.ndarray, gt: np.ndarray) -> dict:
+    """Per-robot ATE [m] after one rigid transform fitted to the whole team (poses, gt: (R, N, 3)),
+    and that transform's rotation [°]: the error of the common frame, removed (as
+    ``fusion_mrclam``'s team-aligned figures)."""
+    names = [str(r) for r in range(len(poses))]
+    ate, t = gauge_free(dict(zip(names, poses)), dict(zip(names, gt)), dict.fromkeys(names, 0))
+    return {"team_aligned_ate": [ate[r] for r in names], "team_rotation_deg": float(np.degrees(t[2]))}
+
+
 def _landmark_error(est: dict[int, np.ndarray], truth: np.ndarray) -> dict[str, float]:
     """Position error of each mapped landmark against its ground truth (by subject) [m]."""
     d = np.array([np.linalg.norm(est[int(s)] - truth[truth[:, 0] == s, 1:3][0]) for s in truth[:, 0] if int(s) in est])
@@ -334,6 +358,8 @@ def main(argv: list[str]) -> int:
     ap.add_argument("--isam-every", type=int, default=1, help="pose times per iSAM2 update (default 1)")
     ap.add_argument("--no-sightings", action="store_true", help="leave robot-to-robot measurements out")
     ap.add_argument("--filter-report", help="a `mrslam mrclam` run folder (or its report.json) to compare with")
+    ap.add_argument("--known", type=int, nargs="+", metavar="ROBOT",
+                    help="robots whose start pose is a prior (default all); batch LM only when not all")
     args = ap.parse_args(argv)
     try:
         import gtsam  # noqa: F401
@@ -350,7 +376,11 @@ def main(argv: list[str]) -> int:
     ds = MrclamDataset(args.folder)
     t = time.perf_counter()
     inputs = mrclam_inputs(ds, cfg)
-    graph = build_graph(**inputs)
+    known_ids = cfg.numbers if args.known is None else tuple(args.known)
+    if not set(known_ids) <= set(cfg.numbers):
+        ap.error(f"--known: robots must be among {list(cfg.numbers)}, got {list(known_ids)}")
+    known = np.isin(cfg.numbers, known_ids)
+    graph = build_graph(**inputs, known=known)
     build_s = time.perf_counter() - t
     times = inputs["pose_times"]
     gt = np.array([ds.groundtruth(i, times) for i in cfg.numbers])
@@ -366,9 +396,12 @@ def main(argv: list[str]) -> int:
     rows["batch LM"] = {
         "ate": _ate_row(batch["poses"], gt), "time_s": time.perf_counter() - t,
         **_landmark_error(batch["landmarks"], ds.landmarks), "iterations": batch["iterations"],
+        **_team_frame(batch["poses"], gt),
     }
     print(f"  batch LM: {rows['batch LM']['time_s']:.1f} s, {batch['iterations']} iterations", flush=True)
-    if not args.no_isam:
+    if not args.no_isam and not known.all():
+        print("  iSAM2 not run: a robot without a start prior has no estimate until measurements link it")
+    elif not args.no_isam:
         t = time.perf_counter()
         isam = solve_isam2(graph, args.isam_every)
         isam_s = time.perf_counter() - t
@@ -386,7 +419,8 @@ def main(argv: list[str]) -> int:
     names = [f"robot {i}" for i in cfg.numbers]
     lines = [
         f"GTSAM baseline, MR.CLAM {args.folder}, first {times[-1] - times[0]:.0f} s, poses every "
-        f"{cfg.team_step:g} s, iSAM2 update every {args.isam_every} pose time(s); ATE RMSE [m] against Vicon "
+        f"{cfg.team_step:g} s, start poses known: robots {' '.join(str(i) for i in known_ids)}, "
+        f"iSAM2 update every {args.isam_every} pose time(s); ATE RMSE [m] against Vicon "
         "at the pose times, no alignment; landmarks: position error against Landmark_Groundtruth, RMSE (max)",
         "",
         "| method | " + " | ".join(names) + " | mean | landmarks [m] | time [s] |",
@@ -397,11 +431,16 @@ def main(argv: list[str]) -> int:
         ts = f"{r['time_s']:.1f}" if r["time_s"] is not None else "–"
         lines.append(f"| {name} | " + " | ".join(f"{a:.3f}" for a in r["ate"])
                      + f" | {np.mean(r['ate']):.3f} | {lm} | {ts} |")
+    tb = rows["batch LM"]
+    lines += ["", "batch LM after one rigid transform fitted to the whole team (the common frame's error "
+              f"removed; rotation {tb['team_rotation_deg']:.1f}°): "
+              + " / ".join(f"{a:.3f}" for a in tb["team_aligned_ate"]) + " m"]
     if note:
         lines += ["", f"filter row: {args.filter_report} ({note})"]
     lines += ["", "iSAM2 online = each pose's estimate right after the update that added it (causal); "
               "iSAM2 final = the smoothed estimate at the end; time of iSAM2 = all updates."]
     data = {"dataset": str(args.folder), "period_s": cfg.team_step, "seconds": float(times[-1] - times[0]),
+            "known": [int(i) for i in known_ids],
             "isam_every": args.isam_every, "build_s": build_s, "measurements": n_meas, "sightings": n_sight,
             "robots": names, "rows": rows}
     write_tables(args.out, "baseline_gtsam", "\n".join(lines), data)

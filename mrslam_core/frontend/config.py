@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Literal
+
+import cv2
 
 
 #: E0 of frame-to-frame tracking per descriptor, squared distance of unit vectors. U-SURF and
@@ -12,6 +14,64 @@ from typing import Literal
 #: half of the ORB corners the KITTI excerpt's next frame found again at the right pixel were
 #: not continued (docs/results.md).
 TRACK_DESCRIPTOR_GATE = {"usurf": 0.5, "sift": 0.5, "orb": 0.78}
+
+
+@dataclass(frozen=True)
+class FiducialConfig:
+    """Robots that carry square fiducials, and how the frontend turns a tag seen in both images
+    into a range and bearing of that robot (:mod:`mrslam_core.frontend.fiducials`).
+
+    Each robot of ``robots`` carries the same tag on the four sides of a cube (the carrier)
+    whose vertical axis is straight above its base_link: a camera at any side sees a face, and
+    the point it measures is the axis, half the cube behind the face along the face's normal.
+
+    Attributes:
+        robots: the robot carrying each tag id: tag k is on ``robots[k]``; empty: no robot
+            carries one and nothing is detected. A robot does not report its own tag.
+        dictionary: the tag family, a name of OpenCV's predefined ArUco dictionaries
+            (``DICT_4X4_50``: 6 cells across, readable from about 3 m at 228 px focal length
+            with 15 cm tags; ``DICT_APRILTAG_36h11`` for AprilTags).
+        tag_size: side of the tag's black square [m].
+        carrier_half: distance from each tag face to the carrier's axis [m]; 0: a single flat
+            tag whose centre is the point measured.
+        carrier_height: height of the tag centres above the floor [m]: a detection whose
+            triangulated centre lies elsewhere is not a robot's tag (counted ``tag_height``).
+        height_tolerance: how far a real carrier may sit from ``carrier_height`` as the camera
+            sees it (mounting, floor tilt) [m]; the height check is χ²(1) at 0.999 on the
+            triangulated height's variance plus this squared.
+        sigma_px: a detected corner's noise per image axis [px]; the disparity's is √2 times.
+        normal_sigma_px: error of a face's normal from its four corners (IPPE) times the face's
+            side in the image [rad·px]: the normal of a tag 15 px wide is uncertain by this / 15
+            rad, and it moves the measured axis sideways by ``carrier_half`` times that
+            (measured in the simulator, docs/results.md).
+        row_tolerance: a tag's corners in the left and right rectified images must share their
+            rows within this [px], and its corners' layout agree within twice this (else they
+            are not one face, counted ``tag_unpaired``).
+    """
+
+    robots: tuple[str, ...] = ()
+    dictionary: str = "DICT_4X4_50"
+    tag_size: float = 0.15
+    carrier_half: float = 0.10
+    carrier_height: float = 0.60
+    height_tolerance: float = 0.05
+    sigma_px: float = 0.5
+    normal_sigma_px: float = 2.0
+    row_tolerance: float = 2.0
+
+    def __post_init__(self) -> None:
+        if not self.dictionary.startswith("DICT_") or not hasattr(cv2.aruco, self.dictionary):
+            raise ValueError(f"dictionary must name an OpenCV ArUco dictionary (DICT_...), got {self.dictionary!r}")
+        if len(set(self.robots)) != len(self.robots) or not all(isinstance(r, str) and r for r in self.robots):
+            raise ValueError(f"robots must be distinct non-empty names, got {self.robots!r}")
+        for name in ("tag_size", "carrier_height", "sigma_px", "row_tolerance"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"{name} must be > 0")
+        for name in ("carrier_half", "height_tolerance", "normal_sigma_px"):
+            if getattr(self, name) < 0:
+                raise ValueError(f"{name} must be >= 0")
+        if self.carrier_half > 0 and self.tag_size > 2 * self.carrier_half:
+            raise ValueError("tag_size must fit on a carrier face (<= 2 carrier_half)")
 
 
 @dataclass(frozen=True)
@@ -98,6 +158,8 @@ class FrontendConfig:
             counted as ``track_gaps`` [s].
         max_stamp_skew_ns: left/right stamps further apart than this drop the pair [ns].
         saturated_fraction: an image with more than this fraction of pixels at 0 or 255 is dropped.
+        fiducials: the other robots' tags, measured as robot sightings; the points on a tag are
+            not published as landmarks (a robot moves).
     """
 
     detector: Literal["harris", "orb", "sift"] = "harris"
@@ -148,6 +210,7 @@ class FrontendConfig:
     max_track_gap: float = 1.0
     max_stamp_skew_ns: int = 5_000_000
     saturated_fraction: float = 0.9
+    fiducials: FiducialConfig = field(default_factory=FiducialConfig)
 
     @property
     def tracking_gate(self) -> float:

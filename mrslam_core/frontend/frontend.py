@@ -20,13 +20,17 @@ import numpy as np
 from mrslam_core.frontend.camera import StereoRig
 from mrslam_core.frontend.config import FrontendConfig
 from mrslam_core.frontend.features import FeatureExtractor, Keypoints
+from mrslam_core.frontend.fiducials import FiducialDetector, inside_quads
 from mrslam_core.frontend.matching import match_stereo
 from mrslam_core.frontend.odometry import CameraMotion, estimate_motion, predict_pixels, skew
 from mrslam_core.frontend.obstacles import ObstacleScan, ObstacleScanner
 from mrslam_core.frontend.spread import select_spread
 from mrslam_core.frontend.tracking import Tracker
 from mrslam_core.geometry.stereo import optical_to_body, triangulate, triangulation_covariance
-from mrslam_core.types import ObservationSet
+from mrslam_core.types import ObservationSet, RobotSighting
+
+#: a detected point this close to a tag's carrier face is on its edge [px]
+TAG_MARGIN_PX = 2.0
 
 ENCODINGS = {  # encoding -> (channels, dtype, conversion to grey)
     "mono8": (1, np.uint8, None),
@@ -141,6 +145,8 @@ class Frontend:
         odometry: the visual odometry after the last processed pair (None before the first).
         vo_failures: processed pairs (after the first) whose motion could not be estimated.
         track_gaps: pairs after a gap longer than ``max_track_gap``: every track ended there.
+        fiducials: the detector of the other robots' tags (None without
+            ``FrontendConfig.fiducials.robots``); its ``drops`` count the tags not reported.
     """
 
     def __init__(self, rig: StereoRig, cfg: FrontendConfig | None = None, robot: str = "robot1"):
@@ -150,6 +156,7 @@ class Frontend:
         self.features = FeatureExtractor(self.cfg)
         self.tracker = Tracker(self.cfg)
         self.scanner = ObstacleScanner(rig, self.cfg)
+        self.fiducials = FiducialDetector(rig, self.cfg.fiducials, robot) if self.cfg.fiducials.robots else None
         self.drops: Counter[str] = Counter()
         self.frames = 0
         self.last_frame: StereoFrame | None = None
@@ -267,11 +274,19 @@ class Frontend:
         self.frames += 1
         self.last_frame = frame
         eligible = frame.track_length >= cfg.min_track_length
+        sightings: tuple[RobotSighting, ...] = ()
+        if self.fiducials is not None:
+            tags = self.fiducials.detect(gl, gr)
+            sightings = tags.sightings
+            # a tag is on a robot, which moves: the points on its carrier face are no landmarks
+            f = cfg.fiducials
+            face = 2 * f.carrier_half / f.tag_size if f.carrier_half > 0 else 1.0
+            eligible &= ~inside_quads(frame.xy, tags.quads, face, TAG_MARGIN_PX)
         pick = select_spread(frame.xy, frame.strength, eligible, cfg.max_observations,
                              self.rig.width, self.rig.height, cfg.grid_cols, cfg.grid_rows)
         z, cov = optical_to_body(frame.points[pick], frame.cov[pick], self.rig.t_base_rect)
         obs = ObservationSet(self.robot, stamp_ns, z.reshape(-1, 3), cov.reshape(-1, 3, 3),
-                             frame.descriptors[pick], frame.track_ids[pick])
+                             frame.descriptors[pick], frame.track_ids[pick], sightings)
         if cfg.obstacle_source == "dense":
             scan = self.scanner.from_images(gl, gr, stamp_ns)
         else:

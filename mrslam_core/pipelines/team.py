@@ -82,13 +82,14 @@ class TeamConfig:
 
 
 def run(cfg: TeamConfig, progress: bool = False, coverage_every: float = 0.0) -> dict:
-    """Run the closed loop; returns trajectories, step times, the map and counters.
+    """Run the closed loop; returns trajectories, step times, the map and counters (among them
+    ``sightings``: per robot, the other robots' tags its frontend reported).
 
     ``coverage_every`` > 0: every that many simulated seconds [s], and at the end, the explored
     fraction of the world's reachable free area is recorded as "coverage" (C, 2): time [s],
     fraction (else "coverage" is None).
     """
-    sim = Simulation(cfg.sim)
+    sim = Simulation(cfg.sim, fiducials=cfg.frontend.fiducials)
     names = [f"robot{i + 1}" for i in range(cfg.robots)]
     for n in names:
         sim.add_robot(n)
@@ -105,6 +106,7 @@ def run(cfg: TeamConfig, progress: bool = False, coverage_every: float = 0.0) ->
     feed = _OdometryFeed(cfg, mapper, names)
     for n in names:
         feed.wheel(n, sim.time_ns, odom0[n])
+    sightings = dict.fromkeys(names, 0)  # the other robots' tags each one reported
     rec = {n: {"t": [0.0], "est": [starts[i]], "gt": [starts[i]], "odom": [starts[i]]} for i, n in enumerate(names)}
     next_control = 0
     control_ns = int(cfg.control_period * 1e9)
@@ -126,6 +128,7 @@ def run(cfg: TeamConfig, progress: bool = False, coverage_every: float = 0.0) ->
             feed.visual(n, frontends[n].odometry)
             if obs is None:  # a dropped frame: the next set carries its motion
                 continue
+            sightings[n] += len(obs.sightings)
             mapper.add_observations(obs)
             scans[n] = scan
         for done in mapper.process(flush=True):
@@ -161,7 +164,8 @@ def run(cfg: TeamConfig, progress: bool = False, coverage_every: float = 0.0) ->
     return {
         "trajectories": trajectories, "update_ms": np.array(mapper.update_ms), "landmarks": {"mean": mean, "cov": cov},
         "dropped": dict(slam.dropped) | dict(mapper.drops), "map_checks": dict(mapper.map_checks),
-        "relocalizations": mapper.relocalizations, "frontend_drops": {n: dict(f.drops) for n, f in frontends.items()},
+        "relocalizations": mapper.relocalizations, "sightings": sightings,
+        "frontend_drops": {n: dict(f.drops) | (dict(f.fiducials.drops) if f.fiducials else {}) for n, f in frontends.items()},
         "explored_fraction": explored, "coverage": None if coverage is None else np.array(coverage),
         "exploration_state": explorer.state.value, **explorer.controller.counters(),
         "wall_s": time.perf_counter() - wall, "outlier_matches": slam.outlier_pairs / slam.num_particles,
@@ -208,7 +212,7 @@ def write_team_run(out: str | Path, cfg: TeamConfig, res: dict) -> dict:
     """The run folder of a :func:`run` result (``evaluation.report.write_run``); returns the report."""
     counters = ("explored_fraction", "dropped", "frontend_drops", "wall_s", "exploration_state", "stalls",
                 "boxed_in", "long_turns", "turn_backoffs", "blocked_turns", "outlier_matches", "map_checks",
-                "relocalizations")
+                "relocalizations", "sightings")
     return write_run(out, res["trajectories"], cfg, res["update_ms"], res["landmarks"],
                      extra={k: res[k] for k in counters}, occupancy=res["occupancy"])
 

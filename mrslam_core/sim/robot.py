@@ -51,12 +51,28 @@ def _visual(geometry: str, material: str, xyz: tuple[float, ...] = (0, 0, 0), rp
             f'{rpy[2]:.9g}"/>\n      <geometry>{geometry}</geometry>\n      <material name="{material}"/>\n    </visual>\n')
 
 
-def robot_description(camera: StereoCameraConfig, drive: DriveConfig, body: PlatformConfig | None = None) -> str:
+def carrier_mesh(half: float) -> str:
+    """Wavefront OBJ text of a tag carrier: the four sides of a cube of half-width ``half`` [m]
+    centred at the origin, each face textured with the whole image, upright and unmirrored as
+    seen from outside (the top and bottom are open)."""
+    lines, faces = [], []
+    # outward normal and the direction that is "right" for a viewer looking at that face
+    for k, (n, r) in enumerate((((1, 0), (0, 1)), ((0, 1), (-1, 0)), ((-1, 0), (0, -1)), ((0, -1), (1, 0)))):
+        for a, b in ((-1, -1), (1, -1), (1, 1), (-1, 1)):
+            lines.append(f"v {half * (n[0] + a * r[0]):.6g} {half * (n[1] + a * r[1]):.6g} {half * b:.6g}")
+        faces += [f"f {4 * k + 1}/1 {4 * k + 2}/2 {4 * k + 3}/3", f"f {4 * k + 1}/1 {4 * k + 3}/3 {4 * k + 4}/4"]
+    return "\n".join(lines + ["vt 0 0", "vt 1 0", "vt 1 1", "vt 0 1"] + faces) + "\n"
+
+
+def robot_description(camera: StereoCameraConfig, drive: DriveConfig, body: PlatformConfig | None = None,
+                      carrier: tuple[str, float, float] | None = None) -> str:
     """URDF of the robot with the footprint of ``body`` (default: ``PlatformConfig()``, the
     simulated Pioneer), wheels at ±track/2 and the stereo head where ``camera`` puts it.
 
     The wheels are fixed links (the simulator drives the base kinematically); the optical frames
-    match :func:`camera_extrinsic`.
+    match :func:`camera_extrinsic`. ``carrier`` = (mesh file of :func:`carrier_mesh`, its
+    half-width [m], the height of its centre [m]) adds a ``tag_carrier`` link above base_link
+    (its texture, the robot's tag, is set on the loaded body).
     """
     parts = []
     r, half = drive.wheel_radius, drive.track / 2
@@ -72,6 +88,15 @@ def robot_description(camera: StereoCameraConfig, drive: DriveConfig, body: Plat
     for side, y in (("left", camera.baseline / 2), ("right", -camera.baseline / 2)):
         parts += [_link(f"camera_{side}_optical_frame"),
                   _fixed("camera_link", f"camera_{side}_optical_frame", (0.0, y, 0.0), (-np.pi / 2, 0.0, -np.pi / 2))]
+    if carrier is not None:
+        mesh, half, height = carrier
+        if height - half <= camera.mount_z + 0.02:
+            raise ValueError("the tag carrier must be above the stereo head")
+        # TinyRenderer does not return from a frame whose eye lies in the plane of a face
+        if min(abs(camera.mount_x - half), abs(camera.mount_x + half), abs(camera.baseline / 2 - half)) < 0.01:
+            raise ValueError("a face of the tag carrier would lie in the plane of a camera")
+        parts += [_link("tag_carrier", _visual(f'<mesh filename="{mesh}"/>', "white")),
+                  _fixed("base_link", "tag_carrier", (0.0, 0.0, height))]
     body = body or PlatformConfig()
     fill = {"centre_x": body.centre_x, "length": body.length, "width": body.width,
             "plate_length": body.length - 2 * PLATE_INSET, "plate_width": body.width - 2 * PLATE_INSET}

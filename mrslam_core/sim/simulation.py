@@ -22,10 +22,13 @@ import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pybullet as p
 
 from mrslam_core.frontend.camera import CameraCalibration
+from mrslam_core.frontend.config import FiducialConfig
+from mrslam_core.frontend.fiducials import tag_image
 from mrslam_core.geometry.se2 import compose, wrap_angle
 from mrslam_core.sim import robot as robot_model
 from mrslam_core.sim.config import SimConfig
@@ -67,13 +70,17 @@ class Simulation:
     Args:
         config: simulation parameters.
         world: a parsed world; default ``load_world(config.world)``.
+        fiducials: the robots that carry tags (the frontends' ``FrontendConfig.fiducials``):
+            each robot named there gets a carrier with its tag, the others a blank one.
 
     Raises:
         SimError: the world cannot be loaded or pybullet cannot connect.
     """
 
-    def __init__(self, config: SimConfig | None = None, world: World | None = None):
+    def __init__(self, config: SimConfig | None = None, world: World | None = None,
+                 fiducials: FiducialConfig | None = None):
         self.config = config or SimConfig()
+        self.fiducials = fiducials if fiducials is not None and fiducials.robots else None
         self.world = world if world is not None else load_world(self.config.world)
         self._rng = np.random.default_rng(self.config.seed)
         self._dt_ns = int(round(1e9 / self.config.physics_hz))
@@ -112,8 +119,32 @@ class Simulation:
         return list(self._names)
 
     def robot_description(self) -> str:
-        """URDF text of the robots (wheels and stereo head as configured)."""
-        return robot_model.robot_description(self.config.camera, self.config.drive)
+        """URDF text of the robots (wheels and stereo head as configured, the tag carrier if
+        robots carry tags)."""
+        carrier = None
+        if self.fiducials is not None:
+            f = self.fiducials
+            if f.carrier_half <= 0:
+                raise SimError("fiducials: the simulator draws tags on a carrier cube (carrier_half > 0)")
+            mesh = Path(self._tmp.name) / "tag_carrier.obj"
+            mesh.write_text(robot_model.carrier_mesh(f.carrier_half))
+            carrier = (str(mesh), f.carrier_half, f.carrier_height)
+        try:
+            return robot_model.robot_description(self.config.camera, self.config.drive, carrier=carrier)
+        except ValueError as exc:
+            raise SimError(f"fiducials: {exc}") from None
+
+    def _draw_tag(self, body: int, name: str) -> None:
+        """Texture robot ``name``'s carrier with its tag (blank if it carries none)."""
+        f, cid = self.fiducials, self.client
+        link = next(j for j in range(p.getNumJoints(body, physicsClientId=cid))
+                    if p.getJointInfo(body, j, physicsClientId=cid)[12].decode() == "tag_carrier")
+        img = tag_image(f, f.robots.index(name)) if name in f.robots else np.full((8, 8), 255, np.uint8)
+        path = Path(self._tmp.name) / f"tag_{len(self._names)}.png"
+        cv2.imwrite(str(path), img)
+        tex = p.loadTexture(str(path), physicsClientId=cid)
+        p.changeVisualShape(body, link, textureUniqueId=tex, rgbaColor=[1, 1, 1, 1], specularColor=[0, 0, 0],
+                            physicsClientId=cid)
 
     def add_robot(self, name: str, start_pose: np.ndarray | None = None) -> None:
         """Place a robot at ``start_pose`` (x, y, θ) in the map [m, m, rad].
@@ -135,6 +166,8 @@ class Simulation:
                           physicsClientId=self.client)
         p.changeDynamics(body, -1, linearDamping=0, angularDamping=0, lateralFriction=0.0,
                          physicsClientId=self.client)
+        if self.fiducials is not None:
+            self._draw_tag(body, name)
         self._names.append(name)
         self._bodies.append(body)
         self._cmd = np.vstack([self._cmd, np.zeros(2)])

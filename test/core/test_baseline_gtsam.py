@@ -7,7 +7,7 @@ measured counter-clockwise from the robot's x axis, as in MR.CLAM.
 import numpy as np
 import pytest
 
-pytest.importorskip("gtsam", reason="the GTSAM baseline needs the optional extra: pip install .[baselines]")
+gtsam = pytest.importorskip("gtsam", reason="the GTSAM baseline needs the optional extra: pip install .[baselines]")
 
 from mrslam_core.experiments.baseline_gtsam import (  # noqa: E402
     build_graph,
@@ -82,6 +82,44 @@ def test_batch_corrects_a_wrong_odometry_step_from_the_measurements():
     assert np.linalg.norm(dead_reckoned[:2] - truth[1, 2, :2]) == pytest.approx(0.3)
     err = np.linalg.norm(batch["poses"][1, 2:, :2] - truth[1, 2:, :2], axis=1)
     assert err.max() < 0.05
+
+
+def test_a_robot_without_a_start_prior_is_placed_by_its_measurements():
+    # robot 2's start is unknown: no prior, and its dead reckoning begins 0.4 m and 0.3 rad away
+    # from the truth; its landmark and robot-1 readings put it exactly where it was
+    _, truth = _truth()
+    prob = _problem()
+    prob["starts"] = prob["starts"].copy()
+    prob["starts"][1] += [0.4, -0.3, 0.3]
+    g = build_graph(**prob, known=np.array([True, False]))
+    priors = [g.factors[0].at(i) for i in range(g.factors[0].size())]
+    priors = [f.keys()[0] for f in priors if isinstance(f, gtsam.PriorFactorPose2)]
+    assert priors == [g.pose_keys[0, 0]]
+    batch = solve_batch(g)
+    assert batch["error"] < 1e-12
+    np.testing.assert_allclose(batch["poses"], truth, atol=1e-6)
+
+
+def test_one_known_start_fixes_the_frame_and_nothing_else():
+    # robot 1's first step is measured by odometry alone (nothing is read at pose 0), and the
+    # odometry reports it as if the world were turned 0.05 rad about robot 1's start: with robot
+    # 1's start the only prior, every other factor agrees with that turned world, and the
+    # solution is the truth turned rigidly, robot 2 and the landmarks with it; with robot 2's
+    # start known as well robot 2 stays where it was
+    _, truth = _truth()
+    prob = _problem()
+    meas = prob["measurements"]
+    prob["measurements"] = meas[meas[:, 1] > 0.0]
+    turn = np.array([0.0, 0.0, -0.05])
+    turned = compose(truth[0, 0], compose(turn, between(truth[0, 0], truth)))
+    prob["odometry"][0, 0] = between(truth[0, 0], turned[0, 1])
+    one = solve_batch(build_graph(**prob, known=np.array([True, False])))
+    assert one["error"] < 1e-12
+    np.testing.assert_allclose(one["poses"][:, 1:], turned[:, 1:], atol=1e-6)
+    np.testing.assert_allclose(one["poses"][1, 0], turned[1, 0], atol=1e-6)
+    both = solve_batch(build_graph(**prob))
+    assert np.abs(both["poses"][1, 0] - truth[1, 0]).max() < 1e-3
+    assert np.abs(both["poses"][1, 0] - turned[1, 0]).max() > 0.04
 
 
 def test_huber_bounds_the_effect_of_an_outlier():
