@@ -28,7 +28,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 from mrslam_core.frontend.camera import CameraCalibration
 from mrslam_core.frontend.frontend import ENCODINGS as FRONTEND_ENCODINGS
 from mrslam_core.geometry.se2 import quaternion_to_yaw, yaw_to_quaternion
-from mrslam_core.types import ObservationSet
+from mrslam_core.types import ObservationSet, RobotSighting
 
 
 class ConversionError(ValueError):
@@ -201,6 +201,50 @@ def cloud_to_observations(msg: PointCloud2, robot: str) -> ObservationSet:
         return ObservationSet(robot, stamp_to_ns(msg.header.stamp), z, cov, desc, tracks)
     except ValueError as exc:
         raise ConversionError(str(exc)) from exc
+
+
+# ----------------------------------------------------------------------------- robot sightings
+#: variance given to what a sighting does not measure (the other robot's height, roll, pitch and
+#: heading) in its nav_msgs/Odometry [m², rad²]
+UNMEASURED_VARIANCE = 1e6
+
+
+def sighting_to_msg(s: RobotSighting, stamp_ns: int) -> Odometry:
+    """A sighting (range [m], bearing [rad] in the observer's base_link) -> nav_msgs/Odometry:
+    the position of ``<target>/base_link`` in ``<observer>/base_link`` (x = r cos b, y = r sin b)
+    with its (x, y) covariance J Σ Jᵀ; the other four pose axes unmeasured (a variance of
+    :data:`UNMEASURED_VARIANCE`), the twist empty."""
+    r, b = (float(v) for v in s.z)
+    jac = np.array([[np.cos(b), -r * np.sin(b)], [np.sin(b), r * np.cos(b)]])
+    full = np.diag([0.0, 0.0] + [UNMEASURED_VARIANCE] * 4)
+    full[:2, :2] = jac @ np.asarray(s.cov, float) @ jac.T
+    msg = Odometry()
+    msg.header.stamp = ns_to_stamp(int(stamp_ns))
+    msg.header.frame_id, msg.child_frame_id = f"{s.observer}/base_link", f"{s.target}/base_link"
+    msg.pose.pose = pose_to_msg(np.array([r * np.cos(b), r * np.sin(b), 0.0]))
+    msg.pose.covariance = full.ravel().tolist()
+    return msg
+
+
+def msg_to_sighting(msg: Odometry, robot: str) -> tuple[int, RobotSighting]:
+    """nav_msgs/Odometry written by :func:`sighting_to_msg` -> (stamp [ns], sighting by
+    ``robot``). Raises ConversionError unless its frame is ``<robot>/base_link``, its child
+    frame ``<target>/base_link`` of another robot, and its position and (x, y) covariance are
+    finite, the covariance positive definite, the position off the observer's origin."""
+    observer, target = msg.header.frame_id.split("/")[0], msg.child_frame_id.split("/")[0]
+    if msg.header.frame_id != f"{robot}/base_link" or msg.child_frame_id != f"{target}/base_link" or target in ("", robot):
+        raise ConversionError(f"a sighting by {robot} must be from {robot}/base_link to another robot's base_link, "
+                              f"got {msg.header.frame_id!r} -> {msg.child_frame_id!r}")
+    x, y = msg.pose.pose.position.x, msg.pose.pose.position.y
+    c = np.asarray(msg.pose.covariance, float)
+    if c.size != 36:
+        raise ConversionError(f"sighting covariance has {c.size} values, expected 36")
+    cxy = c.reshape(6, 6)[:2, :2]
+    r = float(np.hypot(x, y))
+    if not (np.isfinite([x, y]).all() and np.isfinite(cxy).all()) or r <= 0 or np.linalg.eigvalsh(cxy).min() <= 0:
+        raise ConversionError(f"sighting of {target} by {observer}: position {x, y} or covariance not usable")
+    jac = np.array([[x / r, y / r], [-y / r**2, x / r**2]])
+    return stamp_to_ns(msg.header.stamp), RobotSighting(robot, target, np.array([r, np.arctan2(y, x)]), jac @ cxy @ jac.T)
 
 
 # ----------------------------------------------------------------------------- poses

@@ -129,11 +129,13 @@ def launch_config(cfg: DemoConfig, facts: dict, out: Path, view=None):
     names = facts["names"]
     nodes = [NodeSpec(module="mrslam_ros.sim_node", name="sim", use_sim_time=False,
                       params={"robots": team.robots, "real_time_factor": cfg.real_time_factor, "sim": to_dict(team.sim),
-                              "wait_for_frontends": True, "start_delay": cfg.start_delay})]
+                              "fiducials": to_dict(team.fiducials), "wait_for_frontends": True,
+                              "start_delay": cfg.start_delay})]
     t_base_cam = [float(v) for v in np.asarray(facts["t_base_cam"]).ravel()]
     for n in names:
         nodes.append(NodeSpec(module="mrslam_ros.frontend_node", name="frontend", namespace=n,
-                              params={"robot": n, "t_base_cam": t_base_cam, "frontend": to_dict(team.frontend)}))
+                              params={"robot": n, "t_base_cam": t_base_cam, "frontend": to_dict(team.frontend),
+                                      "fiducials": to_dict(team.fiducials)}))
     nodes.append(NodeSpec(module="mrslam_ros.slam_node", name="slam", params=to_dict(slam_params(cfg, facts, out))))
     nodes.append(NodeSpec(module="mrslam_ros.explore_node", name="explore",
                           params={"robots": list(names), "control_period": team.control_period,

@@ -4,7 +4,9 @@ Subscribes ``stereo/{left,right}/image_raw`` and ``stereo/{left,right}/camera_in
 right images whose stamps differ by at most ``max_skew_ns`` (approximate-time sync of
 :mod:`mrslam_ros.sync`, since message_filters is not on PyPI) with the latest camera_info of each
 side, runs :class:`mrslam_core.frontend.frontend.Frontend`, and publishes
-``observations`` (PointCloud2 in ``<robot>/base_link``), ``scan`` (the pseudo laser scan for the
+``observations`` (PointCloud2 in ``<robot>/base_link``), ``sightings`` (one nav_msgs/Odometry per
+other robot whose tag the frame showed, ``FrontendConfig.fiducials``: that robot's position in
+``<robot>/base_link``, published before the frame's observations), ``scan`` (the pseudo laser scan for the
 occupancy grid, LaserScan in ``<robot>/base_link``) and ``visual_odom`` (nav_msgs/Odometry of
 base_link in ``<robot>/visual_odom``, base_link at the first frame: the frontend's visual odometry,
 with the planar pose covariance and the body twist's covariance; frames whose motion could not be
@@ -30,7 +32,7 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import CameraInfo, Image, LaserScan, PointCloud2
 
 from mrslam_core.frontend.camera import StereoRig
-from mrslam_core.frontend.config import FrontendConfig
+from mrslam_core.frontend.config import FiducialConfig, FrontendConfig
 from mrslam_core.frontend.errors import FrontendError
 from mrslam_core.geometry.se2 import between, planar_from_matrix
 from mrslam_ros.conversions import (
@@ -40,6 +42,7 @@ from mrslam_ros.conversions import (
     obstacle_scan_to_laser,
     observations_to_cloud,
     odometry_to_pose,
+    sighting_to_msg,
     stamp_to_ns,
     visual_odometry_msg,
 )
@@ -67,6 +70,7 @@ class FrontendNodeConfig:
             and is what a camera driver publishing best-effort (ROS's sensor-data QoS) needs. A
             publisher the subscription cannot match is counted as ``incompatible_qos``.
         frontend: the frontend's own parameters.
+        fiducials: the robots' tags, reported on ``sightings``.
     """
 
     robot: str = "robot1"
@@ -75,6 +79,7 @@ class FrontendNodeConfig:
     queue: int = 5
     image_qos: Literal["reliable", "best_effort"] = "reliable"
     frontend: FrontendConfig = field(default_factory=FrontendConfig)
+    fiducials: FiducialConfig = field(default_factory=FiducialConfig)
 
 
 class FrontendNode(Node):
@@ -90,6 +95,7 @@ class FrontendNode(Node):
         self.frontend = None
         self._rig_key = None
         self.pub = self.create_publisher(PointCloud2, "observations", OBSERVATION_HISTORY)
+        self.sighting_pub = self.create_publisher(Odometry, "sightings", OBSERVATION_HISTORY)
         self.scan_pub = self.create_publisher(LaserScan, "scan", 10)
         # kept transient-local like wheel odometry: a central node that starts late still takes
         # the robot's start from its first pose
@@ -132,7 +138,7 @@ class FrontendNode(Node):
                 return False
             from mrslam_core.frontend.frontend import Frontend
 
-            self.frontend = Frontend(rig, self.cfg.frontend, robot=self.cfg.robot)
+            self.frontend = Frontend(rig, self.cfg.frontend, robot=self.cfg.robot, fiducials=self.cfg.fiducials)
             self._rig_key = key
         return True
 
@@ -191,8 +197,12 @@ class FrontendNode(Node):
                          "could not estimate (the constant-velocity prediction stood in)")
         self.diag.mirror({"track_gaps": self.frontend.track_gaps}, "", "pairs after a gap in the stream: "
                          "every track ended")
+        if self.frontend.fiducials is not None:
+            self.diag.mirror(self.frontend.fiducials.drops, "frontend_", "tags not reported")
         if obs is not None:
             self.publish_visual_odometry()
+            for sighting in obs.sightings:
+                self.sighting_pub.publish(sighting_to_msg(sighting, obs.stamp_ns))
             self.pub.publish(observations_to_cloud(obs, f"{self.cfg.robot}/base_link"))
         if scan is not None:
             self.scan_pub.publish(obstacle_scan_to_laser(scan, f"{self.cfg.robot}/base_link"))

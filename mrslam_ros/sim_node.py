@@ -20,6 +20,7 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import CameraInfo, Image
 from tf2_msgs.msg import TFMessage
 
+from mrslam_core.frontend.config import FiducialConfig
 from mrslam_core.sim.config import SimConfig
 from mrslam_core.sim.simulation import Simulation
 from mrslam_ros.conversions import (
@@ -48,6 +49,7 @@ class SimNodeConfig:
         start_delay: wall seconds to wait after that before time starts [s] (lets late
             subscribers such as a bag recorder discover the graph).
         sim: the simulation.
+        fiducials: the robots that carry tags, drawn on their carriers.
     """
 
     robots: int = 1
@@ -56,6 +58,7 @@ class SimNodeConfig:
     wait_for_frontends: bool = False
     start_delay: float = 0.0
     sim: SimConfig = field(default_factory=SimConfig)
+    fiducials: FiducialConfig = field(default_factory=FiducialConfig)
 
 
 class SimNode(Node):
@@ -65,7 +68,7 @@ class SimNode(Node):
         super().__init__(name, **kwargs)
         declare_config(self, SimNodeConfig())
         self.cfg = read_config(self, SimNodeConfig)
-        self.sim = Simulation(self.cfg.sim)
+        self.sim = Simulation(self.cfg.sim, fiducials=self.cfg.fiducials)
         self.names = [f"robot{i + 1}" for i in range(self.cfg.robots)]
         for n in self.names:
             self.sim.add_robot(n)

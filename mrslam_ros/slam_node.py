@@ -2,7 +2,10 @@
 
 Subscribes, per robot listed in the config: its odometry (``odometry``: ``/<robot>/odom``, wheel
 odometry, nav_msgs/Odometry odom -> base_link; ``/<robot>/visual_odom``, the frontend's visual
-odometry; or both, fused) and ``/<robot>/observations`` (PointCloud2 from the frontend, base_link). The ordering, pairing with
+odometry; or both, fused), ``/<robot>/observations`` (PointCloud2 from the frontend, base_link) and
+``/<robot>/sightings`` (the other robots it measured, nav_msgs/Odometry from the frontend, joined
+to the observation set of their stamp; scored by the filter and, with ``rendezvous``, evidence
+for joining a robot with an unknown start). The ordering, pairing with
 odometry, the filter and the merging of robots with an unknown start pose (``unknown_start``) live
 in :class:`mrslam_core.pipelines.central.CentralMapper`; this node
 converts and publishes: ``/<robot>/pose`` (PoseWithCovarianceStamped, map), ``/<robot>/path``,
@@ -51,6 +54,7 @@ from mrslam_core.types import ObservationSet
 from mrslam_ros.conversions import (
     ConversionError,
     cloud_to_observations,
+    msg_to_sighting,
     landmark_markers,
     odometry_to_pose,
     odometry_twist_covariance,
@@ -179,8 +183,14 @@ class SlamNode(Node):
         # any publisher matches. A topic with no publisher yet, or a robot's kept sets before its
         # odometry is heard, is subscribed later by :meth:`adapt_inputs` (None until then).
         self._inputs_group = inputs
-        self._input_specs = odometry_specs + [(PointCloud2, f"/{r}/observations", partial(self.on_observations, r),
-                               self.cfg.input_depth) for r in robots]
+        # sightings before observation sets: drained first, they wait for their set in the mapper.
+        # Optional (a team without tags has no publisher): subscribed at once, volatile, if no
+        # publisher is there yet, instead of waited for.
+        sighting_specs = [(Odometry, f"/{r}/sightings", partial(self.on_sightings, r), self.cfg.input_depth)
+                          for r in robots]
+        self._optional_inputs = {spec[1] for spec in sighting_specs}
+        self._input_specs = odometry_specs + sighting_specs + [
+            (PointCloud2, f"/{r}/observations", partial(self.on_observations, r), self.cfg.input_depth) for r in robots]
         #: robots whose odometry has been heard (their kept observation sets are subscribed only then)
         self.odometry_heard: set[str] = set()
         self.inputs: list = []
@@ -265,6 +275,17 @@ class SlamNode(Node):
             self.mapper.add_observations(obs)
             self.diag.mirror(self.mapper.drops, detail=robot)
 
+    def on_sightings(self, robot: str, msg: Odometry) -> None:
+        """Another robot measured by ``robot`` (its tag): into the mapper, to join the set of its stamp."""
+        try:
+            stamp, sighting = msg_to_sighting(msg, robot)
+        except ConversionError as exc:
+            self.diag.count("bad_sighting", f"{robot}: {exc}")
+            return
+        with self.lock:
+            self.mapper.add_sightings(robot, stamp, [sighting])
+            self.diag.mirror(self.mapper.drops, detail=robot)
+
     def on_process(self) -> None:
         """Take every waiting input (:meth:`drain`), then run the filter on what is due, one set at
         a time, for at most ``process_budget`` s, and publish. A flood overflows the mapper's
@@ -330,6 +351,8 @@ class SlamNode(Node):
         msg_type, topic, callback, depth = self._input_specs[i]
         infos = self.get_publishers_info_by_topic(topic)
         if not infos:
+            if topic in self._optional_inputs:
+                return self.create_subscription(msg_type, topic, callback, depth, callback_group=self._inputs_group)
             return None
         qos = adapted_to_publishers(infos, topic, depth)
         robots = self.mapper.robots

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Literal
 
 import cv2
@@ -19,7 +19,9 @@ TRACK_DESCRIPTOR_GATE = {"usurf": 0.5, "sift": 0.5, "orb": 0.78}
 @dataclass(frozen=True)
 class FiducialConfig:
     """Robots that carry square fiducials, and how the frontend turns a tag seen in both images
-    into a range and bearing of that robot (:mod:`mrslam_core.frontend.fiducials`).
+    into a range and bearing of that robot (:mod:`mrslam_core.frontend.fiducials`). One profile
+    section (``fiducials``) for the frontends, the simulator that draws the tags and the team
+    pipeline.
 
     Each robot of ``robots`` carries the same tag on the four sides of a cube (the carrier)
     whose vertical axis is straight above its base_link: a camera at any side sees a face, and
@@ -158,8 +160,6 @@ class FrontendConfig:
             counted as ``track_gaps`` [s].
         max_stamp_skew_ns: left/right stamps further apart than this drop the pair [ns].
         saturated_fraction: an image with more than this fraction of pixels at 0 or 255 is dropped.
-        fiducials: the other robots' tags, measured as robot sightings; the points on a tag are
-            not published as landmarks (a robot moves).
     """
 
     detector: Literal["harris", "orb", "sift"] = "harris"
@@ -210,7 +210,6 @@ class FrontendConfig:
     max_track_gap: float = 1.0
     max_stamp_skew_ns: int = 5_000_000
     saturated_fraction: float = 0.9
-    fiducials: FiducialConfig = field(default_factory=FiducialConfig)
 
     @property
     def tracking_gate(self) -> float:

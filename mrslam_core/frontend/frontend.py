@@ -18,7 +18,7 @@ import cv2
 import numpy as np
 
 from mrslam_core.frontend.camera import StereoRig
-from mrslam_core.frontend.config import FrontendConfig
+from mrslam_core.frontend.config import FiducialConfig, FrontendConfig
 from mrslam_core.frontend.features import FeatureExtractor, Keypoints
 from mrslam_core.frontend.fiducials import FiducialDetector, inside_quads
 from mrslam_core.frontend.matching import match_stereo
@@ -145,18 +145,19 @@ class Frontend:
         odometry: the visual odometry after the last processed pair (None before the first).
         vo_failures: processed pairs (after the first) whose motion could not be estimated.
         track_gaps: pairs after a gap longer than ``max_track_gap``: every track ended there.
-        fiducials: the detector of the other robots' tags (None without
-            ``FrontendConfig.fiducials.robots``); its ``drops`` count the tags not reported.
+        fiducials: the detector of the other robots' tags (None without a ``fiducials`` config
+            naming robots); its ``drops`` count the tags not reported.
     """
 
-    def __init__(self, rig: StereoRig, cfg: FrontendConfig | None = None, robot: str = "robot1"):
+    def __init__(self, rig: StereoRig, cfg: FrontendConfig | None = None, robot: str = "robot1",
+                 fiducials: FiducialConfig | None = None):
         self.rig = rig
         self.cfg = cfg if cfg is not None else FrontendConfig()
         self.robot = robot
         self.features = FeatureExtractor(self.cfg)
         self.tracker = Tracker(self.cfg)
         self.scanner = ObstacleScanner(rig, self.cfg)
-        self.fiducials = FiducialDetector(rig, self.cfg.fiducials, robot) if self.cfg.fiducials.robots else None
+        self.fiducials = FiducialDetector(rig, fiducials, robot) if fiducials is not None and fiducials.robots else None
         self.drops: Counter[str] = Counter()
         self.frames = 0
         self.last_frame: StereoFrame | None = None
@@ -279,7 +280,7 @@ class Frontend:
             tags = self.fiducials.detect(gl, gr)
             sightings = tags.sightings
             # a tag is on a robot, which moves: the points on its carrier face are no landmarks
-            f = cfg.fiducials
+            f = self.fiducials.cfg
             face = 2 * f.carrier_half / f.tag_size if f.carrier_half > 0 else 1.0
             eligible &= ~inside_quads(frame.xy, tags.quads, face, TAG_MARGIN_PX)
         pick = select_spread(frame.xy, frame.strength, eligible, cfg.max_observations,

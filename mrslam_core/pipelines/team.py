@@ -27,7 +27,7 @@ from mrslam_core.exploration.coverage import explored_fraction
 from mrslam_core.exploration.explorer import Explorer, State
 from mrslam_core.exploration.grid import OccupancyGrid, Scan
 from mrslam_core.frontend.camera import StereoRig
-from mrslam_core.frontend.config import FrontendConfig
+from mrslam_core.frontend.config import FiducialConfig, FrontendConfig
 from mrslam_core.frontend.frontend import Frontend, VisualOdometry
 from mrslam_core.frontend.odometry import planar_motion
 from mrslam_core.geometry.se2 import between, planar_from_matrix
@@ -57,8 +57,9 @@ class TeamConfig:
             simulator's), ``visual`` (the frontend's visual odometry) or ``fused`` (both, step by
             step with their information matrices, :class:`OdometryFusion`, the wheels' noise
             model being ``filter.motion``). The frontends' search windows follow the wheels in all.
-        frontend, filter, exploration, control, grid: by default the simulated team profile
-            (config/sim_team.yaml).
+        frontend, fiducials, filter, exploration, control, grid: by default the simulated team
+            profile (config/sim_team.yaml). ``fiducials``: the robots whose tags the simulator
+            draws and the frontends report as sightings.
     """
 
     robots: int = 3
@@ -68,6 +69,7 @@ class TeamConfig:
     odometry: Literal["wheel", "visual", "fused"] = "wheel"
     sim: SimConfig = field(default_factory=SimConfig)
     frontend: FrontendConfig = field(default_factory=lambda: profile_section(FrontendConfig, TEAM_PROFILE, "frontend"))
+    fiducials: FiducialConfig = field(default_factory=lambda: profile_section(FiducialConfig, TEAM_PROFILE, "fiducials"))
     filter: FilterConfig = field(default_factory=lambda: profile_section(FilterConfig, TEAM_PROFILE, "filter"))
     map_check: MapCheckConfig = field(default_factory=MapCheckConfig)
     exploration: ExplorationConfig = field(default_factory=lambda: profile_section(ExplorationConfig, TEAM_PROFILE, "exploration"))
@@ -89,13 +91,13 @@ def run(cfg: TeamConfig, progress: bool = False, coverage_every: float = 0.0) ->
     fraction of the world's reachable free area is recorded as "coverage" (C, 2): time [s],
     fraction (else "coverage" is None).
     """
-    sim = Simulation(cfg.sim, fiducials=cfg.frontend.fiducials)
+    sim = Simulation(cfg.sim, fiducials=cfg.fiducials)
     names = [f"robot{i + 1}" for i in range(cfg.robots)]
     for n in names:
         sim.add_robot(n)
     starts = np.array([sim.ground_truth(n) for n in names])
     rig = StereoRig(*sim.camera_infos(), sim.camera_extrinsic())
-    frontends = {n: Frontend(rig, cfg.frontend, robot=n) for n in names}
+    frontends = {n: Frontend(rig, cfg.frontend, robot=n, fiducials=cfg.fiducials) for n in names}
     mapper = CentralMapper(CentralConfig(robots=tuple(names), start_poses=tuple(float(v) for v in starts.ravel()),
                                          map_check=cfg.map_check, filter=cfg.filter))
     slam = mapper.slam

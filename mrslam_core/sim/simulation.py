@@ -70,8 +70,8 @@ class Simulation:
     Args:
         config: simulation parameters.
         world: a parsed world; default ``load_world(config.world)``.
-        fiducials: the robots that carry tags (the frontends' ``FrontendConfig.fiducials``):
-            each robot named there gets a carrier with its tag, the others a blank one.
+        fiducials: the robots that carry tags (the frontends' ``fiducials`` config): each robot
+            named there gets a carrier with its tag, the others a blank one.
 
     Raises:
         SimError: the world cannot be loaded or pybullet cannot connect.

@@ -1,5 +1,6 @@
 """The central mapper: stamp order across robots, bounded waits, pairing with odometry, counted drops."""
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -136,6 +137,36 @@ def test_bad_input_is_counted_and_leaves_the_filter_alone():
     assert m.drops == {"unknown_robot": 2, "odometry_out_of_order": 1, "odometry_duplicate_stamp": 1,
                        "bad_odometry": 1, "duplicate_stamp": 1, "stale_stamp": 1, "no_odometry_at_stamp": 2}
     assert m.slam.steps == 2
+
+
+def test_sightings_that_come_apart_from_their_set_join_it():
+    """The SLAM node's ``sightings`` topic: a sighting before its set is held and joins it, one
+    after it joins it in the queue, one whose set never came goes alone once a newer set is in
+    (or at a flush), one for a processed stamp is counted; held ones are in the checkpoint."""
+    from mrslam_core.types import RobotSighting
+
+    m = CentralMapper(_cfg())
+    _odom(m, "robot1", 3)
+    _odom(m, "robot2", 3)
+    seen = RobotSighting("robot1", "robot2", np.array([1.0, np.pi / 2]), np.eye(2) * 0.01)
+    assert m.add_sightings("robot1", int(1.0 * S), [seen])       # before its set
+    m.add_observations(_obs("robot1", 1.0))
+    m.add_observations(_obs("robot1", 1.2))
+    assert m.add_sightings("robot1", int(1.2 * S), [seen, seen])  # after it, while queued
+    assert m.add_sightings("robot1", int(1.3 * S), [seen])       # its set never comes
+    m.add_observations(_obs("robot1", 1.4))
+    assert m.add_sightings("robot1", int(1.6 * S), [seen])       # held at the checkpoint
+    queued = {o.stamp_ns: (len(o), len(o.sightings)) for *_, o in m.ordering._queue}
+    assert queued == {int(1.0 * S): (3, 1), int(1.2 * S): (3, 2), int(1.3 * S): (0, 1), int(1.4 * S): (3, 0)}
+    state = m.ordering.state()
+    fresh = CentralMapper(_cfg())
+    fresh.ordering.load_state(state)
+    _assert_same_state(state, fresh.ordering.state())
+    assert not m.add_sightings("robot1", int(1.0 * S), [replace(seen, observer="robot2")])
+    done = m.process(flush=True)
+    assert _order(done) == [("robot1", 1.0), ("robot1", 1.2), ("robot1", 1.3), ("robot1", 1.4), ("robot1", 1.6)]
+    assert not m.add_sightings("robot1", int(1.5 * S), [seen])
+    assert m.drops == {"unknown_robot": 1, "stale_sighting": 1}
 
 
 def test_a_set_inside_a_hole_in_the_odometry_is_dropped_not_interpolated():
@@ -305,7 +336,6 @@ def _rendezvous_run(resume_in: Path | None = None, resume_at: int = -1) -> tuple
     (exact readings, stated σ 0.05 m / 0.02 rad), robot1 alone reads robot2 at step 10; with
     ``resume_in`` the mapper is saved and resumed after step ``resume_at``. Returns the mapper, the
     true poses by (robot, stamp) and robot2's stamps."""
-    from dataclasses import replace
 
     from mrslam_core.datasets.synthetic import SyntheticWorld, SyntheticWorldConfig
     from mrslam_core.fusion.config import FusionConfig
@@ -628,7 +658,8 @@ def test_every_attribute_of_a_part_is_in_its_state_or_comes_from_the_config():
     queue's key set (``_queued``, rebuilt from the queue)."""
     m = CentralMapper(_cfg())
     derived = {"cfg", "robots", "_robots", "_known", "_starts", "_wait_ns", "_step_ns", "drops", "_queued"}
-    assert set(vars(m.ordering)) - derived == {"now_ns", "last", "_odom", "_queue", "_seq", "_latest_obs", "_first_ns"}
+    assert set(vars(m.ordering)) - derived == {"now_ns", "last", "_odom", "_queue", "_seq", "_latest_obs", "_first_ns",
+                                               "_held"}
     assert set(vars(m.lifecycle)) - derived == {"local", "_updates", "merges", "restarts", "gate", "_readings"}
     assert set(vars(m.corrections)) - derived == {"relocalizations", "map_checks", "distrusted",
                                                   "_returning", "_reloc_tried", "_recent", "_checked",

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from mrslam_core.frontend.camera import CameraCalibration
-from mrslam_core.types import ObservationSet
+from mrslam_core.types import ObservationSet, RobotSighting
 from mrslam_ros.conversions import (
     ConversionError,
     array_to_image,
@@ -13,11 +13,13 @@ from mrslam_ros.conversions import (
     cloud_to_observations,
     image_to_array,
     msg_to_pose,
+    msg_to_sighting,
     observations_to_cloud,
     occupancy_msg,
     odometry_to_pose,
     path_msg,
     pose_with_covariance,
+    sighting_to_msg,
     stamp_to_ns,
     transform_msg,
 )
@@ -308,3 +310,25 @@ def test_points_marker_round_trip_and_clear():
     assert marker_points(points_marker(np.zeros((0, 2)), 0, "map", "frontiers")).shape == (0, 3)
     with pytest.raises(ConversionError):
         points_marker(np.array([[np.nan, 0.0]]), 0, "map", "frontiers")
+
+
+def test_sighting_round_trip_and_bad_sightings():
+    # robot2 2 m away at 120° in robot1's base_link, range σ 0.05 m, bearing σ 0.02 rad, correlated
+    cov = np.array([[0.05**2, 0.0004], [0.0004, 0.02**2]])
+    s = RobotSighting("robot1", "robot2", np.array([2.0, np.radians(120.0)]), cov)
+    msg = sighting_to_msg(s, 7_000_000_001)
+    assert (msg.header.frame_id, msg.child_frame_id) == ("robot1/base_link", "robot2/base_link")
+    assert msg.pose.pose.position.x == pytest.approx(-1.0) and msg.pose.pose.position.y == pytest.approx(np.sqrt(3))
+    stamp, back = msg_to_sighting(msg, "robot1")
+    assert stamp == 7_000_000_001 and (back.observer, back.target) == ("robot1", "robot2")
+    np.testing.assert_allclose(back.z, s.z, atol=1e-12)
+    np.testing.assert_allclose(back.cov, cov, atol=1e-12)
+    with pytest.raises(ConversionError, match="another robot"):
+        msg_to_sighting(msg, "robot3")  # another robot's sighting on this robot's topic
+    msg.child_frame_id = "robot1/base_link"
+    with pytest.raises(ConversionError, match="another robot"):
+        msg_to_sighting(msg, "robot1")  # itself
+    msg = sighting_to_msg(s, 1)
+    msg.pose.covariance = [0.0] * 36
+    with pytest.raises(ConversionError, match="not usable"):
+        msg_to_sighting(msg, "robot1")

@@ -170,8 +170,14 @@ def test_bad_input_is_counted_on_diagnostics_and_the_node_keeps_running():
     from rclpy.qos import DurabilityPolicy
     from sensor_msgs.msg import PointCloud2
 
-    from mrslam_core.types import ObservationSet
-    from mrslam_ros.conversions import diagnostics_to_counters, ns_to_stamp, observations_to_cloud, pose_to_msg
+    from mrslam_core.types import ObservationSet, RobotSighting
+    from mrslam_ros.conversions import (
+        diagnostics_to_counters,
+        ns_to_stamp,
+        observations_to_cloud,
+        pose_to_msg,
+        sighting_to_msg,
+    )
     from mrslam_ros.slam_node import SlamNode
 
     rclpy.init()
@@ -182,6 +188,7 @@ def test_bad_input_is_counted_on_diagnostics_and_the_node_keeps_running():
         odom = feeder.create_publisher(Odometry, "/robot1/odom", 10)
         obs = feeder.create_publisher(PointCloud2, "/robot1/observations", 10)
         stranger = feeder.create_publisher(PointCloud2, "/robot9/observations", 10)
+        sightings = feeder.create_publisher(Odometry, "/robot1/sightings", 10)
         diags = []
         feeder.create_subscription(DiagnosticArray, "/diagnostics", diags.append, 10)
         ex = SingleThreadedExecutor()
@@ -210,13 +217,16 @@ def test_bad_input_is_counted_on_diagnostics_and_the_node_keeps_running():
         broken.data = broken.data[:10]  # truncated
         obs.publish(broken)
         stranger.publish(observations_to_cloud(good, "robot9/base_link"))
+        itself = sighting_to_msg(RobotSighting("robot1", "robot1", np.array([1.0, 0.0]), np.eye(2) * 0.01), 10**9)
+        sightings.publish(itself)  # a robot reading its own tag
         end = time.time() + 5
         while time.time() < end:
             spin(5)
         counters = {}
         for d in diags:
             counters.update(diagnostics_to_counters(d).get("/slam", {}))
-        for reason in ("odometry_duplicate_stamp", "odometry_out_of_order", "wrong_frame", "bad_cloud", "unknown_robot"):
+        for reason in ("odometry_duplicate_stamp", "odometry_out_of_order", "wrong_frame", "bad_cloud", "unknown_robot",
+                       "bad_sighting"):
             assert counters.get(f"drops.{reason}", 0) >= 1, (reason, counters)
         assert counters.get("drops.duplicate_stamp", 0) + counters.get("drops.stale_stamp", 0) >= 1, counters
         assert counters["updates"] == 1  # the one good set went through
@@ -428,5 +438,83 @@ def test_observation_sets_kept_before_the_odometry_are_taken_only_once_it_is_hea
         drops = dict(slam.diag.drops)
         assert drops.get("no_odometry_at_stamp", 0) == 0, drops
         assert len(slam.mapper.trajectory["robot4"]) == 10, drops
+    finally:
+        rclpy.shutdown()
+
+
+def test_a_sighting_on_its_own_topic_joins_the_observation_set_of_its_stamp():
+    """The frontend publishes a robot's sightings (``/<robot>/sightings``) before the frame's
+    observation cloud: the filter gets them in that one set, in either arrival order."""
+    import rclpy
+    from nav_msgs.msg import Odometry
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.parameter import Parameter
+    from sensor_msgs.msg import PointCloud2
+
+    from mrslam_core.types import ObservationSet, RobotSighting
+    from mrslam_ros.conversions import ns_to_stamp, observations_to_cloud, pose_to_msg, sighting_to_msg
+    from mrslam_ros.slam_node import SlamNode
+
+    rclpy.init()
+    try:
+        slam = SlamNode(parameter_overrides=[Parameter("robots", value=["robot1", "robot2"]),
+                                             Parameter("start_poses", value=[0.0, 0.0, 0.0, 2.0, 0.0, 3.14]),
+                                             Parameter("filter.num_particles", value=20)])
+        got = []
+        scored = slam.mapper._sightings
+        slam.mapper._sightings = lambda filt, obs: got.append((obs.robot, obs.stamp_ns, len(obs.sightings))) or scored(filt, obs)
+        feeder = rclpy.create_node("feeder")
+        odom = {r: feeder.create_publisher(Odometry, f"/{r}/odom", 10) for r in ("robot1", "robot2")}
+        clouds = {r: feeder.create_publisher(PointCloud2, f"/{r}/observations", 10) for r in ("robot1", "robot2")}
+        seen = feeder.create_publisher(Odometry, "/robot1/sightings", 10)
+        ex = SingleThreadedExecutor()
+        ex.add_node(slam)
+        ex.add_node(feeder)
+
+        def spin(n=20):
+            for _ in range(n):
+                ex.spin_once(timeout_sec=0.01)
+
+        end = time.time() + 10
+        while time.time() < end and (slam.unsubscribed or feeder.count_subscribers("/robot1/sightings") == 0):
+            spin(1)
+        spin(10)
+        for t in range(4):
+            for r in odom:
+                m = Odometry()
+                m.header.stamp = ns_to_stamp(t * 10**9)
+                m.pose.pose = pose_to_msg(np.zeros(3))
+                odom[r].publish(m)
+        spin(10)
+        reading = RobotSighting("robot1", "robot2", np.array([2.0, 0.0]), np.diag([0.05**2, 0.02**2]))
+        # t = 1 s: the sighting before the cloud; 2 s: after robot1's cloud, which waits for
+        # robot2's; 3 s: after its set was processed (counted)
+        def cloud(r, stamp):
+            clouds[r].publish(observations_to_cloud(ObservationSet(r, stamp, np.zeros((0, 3)), np.zeros((0, 3, 3))),
+                                                    f"{r}/base_link"))
+            spin(5)
+
+        for t in (1, 2, 3):
+            stamp = t * 10**9
+            if t == 1:
+                seen.publish(sighting_to_msg(reading, stamp))
+                spin(5)
+            cloud("robot1", stamp)
+            if t == 2:
+                seen.publish(sighting_to_msg(reading, stamp))
+                spin(5)
+            cloud("robot2", stamp)
+            if t == 3:
+                end = time.time() + 5
+                while time.time() < end and len(got) < 6:
+                    spin(5)
+                seen.publish(sighting_to_msg(reading, stamp))
+            spin(5)
+        end = time.time() + 5
+        while time.time() < end and "stale_sighting" not in slam.mapper.drops:
+            spin(5)
+        assert sorted(got) == [("robot1", 10**9, 1), ("robot1", 2 * 10**9, 1), ("robot1", 3 * 10**9, 0),
+                               ("robot2", 10**9, 0), ("robot2", 2 * 10**9, 0), ("robot2", 3 * 10**9, 0)]
+        assert slam.mapper.drops["stale_sighting"] == 1
     finally:
         rclpy.shutdown()

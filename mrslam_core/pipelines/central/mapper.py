@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import time
 from collections import Counter
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -136,6 +137,12 @@ class CentralMapper:
         """Queue an observation set (base_link of ``obs.robot``), with its sightings of other
         robots (scored in the weights of the filter that maps both); False if dropped."""
         return self.ordering.add_observations(obs)
+
+    def add_sightings(self, robot: str, stamp_ns: int, sightings: Sequence[RobotSighting]) -> bool:
+        """Sightings of other robots by ``robot`` at ``stamp_ns`` [ns] that come apart from its
+        observation set (a topic of their own): they join that set
+        (:meth:`Ordering.add_sightings`); False, counted, if dropped."""
+        return self.ordering.add_sightings(robot, stamp_ns, sightings)
 
     # ------------------------------------------------------------------ processing
     def process(self, flush: bool = False, budget_s: float | None = None, max_sets: int | None = None) -> list[Processed]:

@@ -9,8 +9,9 @@ frontends that lag behind the odometry do not reorder anything). With ``team_ste
 one window of stamps are released together, once every active robot has delivered a set at or
 after the window's end (or the end is ``max_wait`` old): one filter step. A released set is
 paired with the robot's odometry interpolated at its stamp; the motion since the robot's previous
-update is the filter's odometry input. Everything that cannot be used is counted in the mapper's
-drops.
+update is the filter's odometry input. Sightings of other robots that arrive apart from their
+set (a topic of their own) join the set of their robot and stamp. Everything that cannot be used
+is counted in the mapper's drops.
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ import bisect
 import heapq
 from collections import Counter, deque
 from collections.abc import Callable, Iterator, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from operator import itemgetter
 from typing import Any
 
@@ -28,7 +29,12 @@ import numpy as np
 from mrslam_core.geometry.se2 import wrap_angle
 from mrslam_core.pipelines.central.config import CentralConfig
 from mrslam_core.pipelines.central.state import set_from_state, sets_state
-from mrslam_core.types import ObservationSet
+from mrslam_core.types import ObservationSet, RobotSighting
+
+
+def _sightings_only(robot: str, stamp_ns: int, sightings: Sequence[RobotSighting]) -> ObservationSet:
+    """A set of ``robot`` at ``stamp_ns`` holding sightings and no landmark measurement."""
+    return ObservationSet(robot, int(stamp_ns), np.zeros((0, 3)), np.zeros((0, 3, 3)), sightings=tuple(sightings))
 
 
 Odometry = Sequence[tuple[int, np.ndarray]]
@@ -104,6 +110,8 @@ class Ordering:
         #: heap of (stamp_ns, robot index, arrival number, set): stamp order, ties by robot
         self._queue: list[tuple[int, int, int, ObservationSet]] = []
         self._queued: set[tuple[str, int]] = set()
+        #: (robot, stamp) -> sightings that came on their own, waiting for that set
+        self._held: dict[tuple[str, int], list[RobotSighting]] = {}
         self._seq = 0
         self._latest_obs: dict[str, int] = {}
         self._first_ns: int | None = None
@@ -160,7 +168,8 @@ class Ordering:
 
     # ------------------------------------------------------------------ observation sets
     def add_observations(self, obs: ObservationSet) -> bool:
-        """Queue an observation set (base_link of ``obs.robot``); False, counted, if dropped."""
+        """Queue an observation set (base_link of ``obs.robot``); False, counted, if dropped.
+        Sightings held for its robot and stamp (:meth:`add_sightings`) join it."""
         if obs.robot not in self._odom:
             self.drops["unknown_robot"] += 1
             return False
@@ -172,6 +181,43 @@ class Ordering:
         if key in self._queued:
             self.drops["duplicate_stamp"] += 1
             return False
+        held = self._held.pop(key, None)
+        if held is not None:
+            obs = replace(obs, sightings=obs.sightings + tuple(held))
+        self._release_held(obs.robot, key[1])
+        return self._queue_set(obs)
+
+    def add_sightings(self, robot: str, stamp_ns: int, sightings: Sequence[RobotSighting]) -> bool:
+        """Sightings by ``robot`` at ``stamp_ns`` that came apart from its observation set (the
+        SLAM node's ``sightings`` topic): they join the set of that stamp, queued or still to come;
+        if the robot's next set is newer they go as a set of their own. False, counted, if they
+        are for a robot not in the team or a stamp already processed (``stale_sighting``)."""
+        if robot not in self._odom or any(s.observer != robot for s in sightings):
+            self.drops["unknown_robot"] += 1
+            return False
+        key = (robot, int(stamp_ns))
+        last = self.last.get(robot)
+        if last is not None and stamp_ns <= last[0]:
+            self.drops["stale_sighting"] += len(sightings)
+            return False
+        if key in self._queued:
+            for i, (stamp, idx, seq, queued) in enumerate(self._queue):
+                if (queued.robot, stamp) == key:
+                    self._queue[i] = (stamp, idx, seq, replace(queued, sightings=queued.sightings + tuple(sightings)))
+            return True
+        if self._latest_obs.get(robot, -1) > stamp_ns:
+            return self._queue_set(_sightings_only(robot, stamp_ns, sightings))
+        self._held.setdefault(key, []).extend(sightings)
+        return True
+
+    def _release_held(self, robot: str, stamp_ns: int) -> None:
+        """Held sightings of ``robot`` older than its set at ``stamp_ns``, whose own set never
+        came (a frame the frontend dropped after measuring them), queued as sets of their own."""
+        for key in sorted(k for k in self._held if k[0] == robot and k[1] < stamp_ns):
+            self._queue_set(_sightings_only(robot, key[1], self._held.pop(key)))
+
+    def _queue_set(self, obs: ObservationSet) -> bool:
+        key = (obs.robot, int(obs.stamp_ns))
         if len(self._queue) >= self.cfg.max_queue:
             _, _, _, old = heapq.heappop(self._queue)
             self._queued.discard((old.robot, old.stamp_ns))
@@ -195,7 +241,11 @@ class Ordering:
         taken off the queue before it is yielded, while ``more()``; a due set whose robot has no
         odometry at its stamp is dropped (counted). A team step is one set, or with ``team_step``
         every set of one window of stamps, due once every active robot has delivered a set at or
-        after the window's end (or the end is ``max_wait`` older than the newest set)."""
+        after the window's end (or the end is ``max_wait`` older than the newest set). With
+        ``flush`` held sightings go as sets of their own first."""
+        if flush:
+            for key in sorted(self._held):
+                self._queue_set(_sightings_only(key[0], key[1], self._held.pop(key)))
         while self._queue and more():
             if self._step_ns:
                 window = self._due_window(flush)
@@ -274,13 +324,16 @@ class Ordering:
     def state(self) -> dict[str, Any]:
         """Everything above as JSON values and arrays: ``odom_t_{k}`` int64 (N,) [ns] and
         ``odom_p_{k}`` (N, 3) per robot index k, ``queue`` ([robot, stamp_ns, arrival]) in release
-        order with the sets' arrays (``queue_*_{i}``), ``last`` (robot: [stamp_ns, x, y, θ])."""
+        order with the sets' arrays (``queue_*_{i}``), ``held`` ([robot, stamp_ns]) with the held
+        sightings (``held_sight_*_{i}``), ``last`` (robot: [stamp_ns, x, y, θ])."""
         queue = sorted(self._queue, key=lambda e: e[:3])
         out: dict[str, Any] = {
             "last": {r: [s, *map(float, p)] for r, (s, p) in self.last.items()},
             "latest_obs": dict(self._latest_obs), "first_ns": self._first_ns, "now_ns": self.now_ns,
             "seq": self._seq, "queue": [[o.robot, stamp, seq] for stamp, _, seq, o in queue],
             **sets_state("queue", [o for *_, o in queue]),
+            "held": [[r, t] for r, t in sorted(self._held)],
+            **sets_state("held", [_sightings_only(r, t, self._held[(r, t)]) for r, t in sorted(self._held)]),
         }
         for k, r in enumerate(self.robots):
             out[f"odom_t_{k}"] = np.array([t for t, _ in self._odom[r]], np.int64)
@@ -300,3 +353,5 @@ class Ordering:
             self._queue.append((int(stamp), self.robots.index(robot), int(seq), obs))
             self._queued.add((robot, int(stamp)))
         heapq.heapify(self._queue)
+        for i, (robot, stamp) in enumerate(state.get("held", [])):  # a checkpoint before held sightings has none
+            self._held[(robot, int(stamp))] = list(set_from_state(state, "held", i, robot, stamp).sightings)

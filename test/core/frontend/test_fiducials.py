@@ -127,7 +127,7 @@ def test_the_frontend_reports_the_tag_and_maps_no_point_on_it(tagged_sim):
     rig = StereoRig(*sim.camera_infos(), sim.camera_extrinsic())
     from mrslam_core.frontend import Frontend
 
-    fe = Frontend(rig, replace(FrontendConfig(min_track_length=1), fiducials=CFG), robot="robot1")
+    fe = Frontend(rig, FrontendConfig(min_track_length=1), robot="robot1", fiducials=CFG)
     frame = sim.render_stereo("robot1")
     obs, _ = fe.step(frame.left, frame.right, frame.stamp_ns)
     assert [s.target for s in obs.sightings] == ["robot2"]
@@ -135,5 +135,47 @@ def test_the_frontend_reports_the_tag_and_maps_no_point_on_it(tagged_sim):
     on_carrier = (np.abs(obs.z[:, 0] - 1.2) < 0.15) & (np.abs(obs.z[:, 1]) < 0.15) & (obs.z[:, 2] > 0.45)
     assert len(obs.z) > 0 and not on_carrier.any()
     # robot2 does not report itself
-    fe2 = Frontend(rig, replace(FrontendConfig(), fiducials=CFG), robot="robot2")
+    fe2 = Frontend(rig, FrontendConfig(), robot="robot2", fiducials=CFG)
     assert fe2.fiducials.detect(frame.left, frame.right).sightings == ()
+
+
+def test_a_robot_with_an_unknown_start_joins_by_rendezvous_on_rendered_tags():
+    """The central mapper on rendered stereo: robot2 starts with no known pose, 2.5 m in front
+    of robot1 and facing it; both read each other's tag every frame, the first mutual sighting
+    is held, the next one agrees and joins robot2 at its pose (issue 28 part 6: the stereo
+    mapper uses the same joins as MR.CLAM, rendezvous included). Filter seeds 0-4: joined at
+    0.2 s, 0.030-0.046 m and 0.3-0.4° from its true pose."""
+    from mrslam_core.configio import profile_section
+    from mrslam_core.frontend import Frontend
+    from mrslam_core.pipelines.central import CentralConfig, CentralMapper
+    from mrslam_core.pipelines.team import TEAM_PROFILE
+    from mrslam_core.sim import SimConfig, Simulation
+    from mrslam_core.slam.config import FilterConfig
+
+    starts = {"robot1": np.array([1.5, 2.0, 0.1]), "robot2": np.array([4.0, 2.2, np.pi - 0.05])}
+    with Simulation(SimConfig(world="small", texture_density=32), fiducials=CFG) as sim:
+        for n, pose in starts.items():
+            sim.add_robot(n, pose)
+        rig = StereoRig(*sim.camera_infos(), sim.camera_extrinsic())
+        fe = {n: Frontend(rig, profile_section(FrontendConfig, TEAM_PROFILE, "frontend"), n, CFG) for n in starts}
+        filt = replace(profile_section(FilterConfig, TEAM_PROFILE, "filter"), num_particles=100, seed=1)
+        mapper = CentralMapper(CentralConfig(robots=tuple(starts), start_poses=(*starts["robot1"], 0.0, 0.0, 0.0),
+                                             unknown_start=("robot2",), rendezvous=True, filter=filt))
+        sightings = 0
+        while sim.time_ns < 3e9:
+            sim.step()
+            for n in sim.frames_due():
+                frame = sim.render_stereo(n)
+                mapper.add_odometry(n, frame.stamp_ns, sim.odometry(n)[0])
+                obs, _ = fe[n].step(frame.left, frame.right, frame.stamp_ns)
+                sightings += len(obs.sightings)
+                mapper.add_observations(obs)
+            mapper.process()
+        mapper.process(flush=True)
+    joins = [m for m in mapper.merges if m["accepted"]]
+    assert sightings >= 20
+    assert [m["via"] for m in joins] == ["rendezvous with robot1"]
+    assert "robot2" not in mapper.local
+    _, poses = mapper.trajectories()["robot2"]
+    err = poses[-1] - starts["robot2"]
+    assert np.hypot(*err[:2]) < 0.08 and abs(np.angle(np.exp(1j * err[2]))) < np.radians(2.0)
