@@ -155,16 +155,20 @@ def test_sightings_that_come_apart_from_their_set_join_it():
     assert m.add_sightings("robot1", int(1.2 * S), [seen, seen])  # after it, while queued
     assert m.add_sightings("robot1", int(1.3 * S), [seen])       # its set never comes
     m.add_observations(_obs("robot1", 1.4))
+    assert m.add_sightings("robot1", int(1.35 * S), [seen])      # after a newer set: alone, then
+    m.add_observations(_obs("robot1", 1.35))                       # its set comes late and joins it
     assert m.add_sightings("robot1", int(1.6 * S), [seen])       # held at the checkpoint
     queued = {o.stamp_ns: (len(o), len(o.sightings)) for *_, o in m.ordering._queue}
-    assert queued == {int(1.0 * S): (3, 1), int(1.2 * S): (3, 2), int(1.3 * S): (0, 1), int(1.4 * S): (3, 0)}
+    assert queued == {int(1.0 * S): (3, 1), int(1.2 * S): (3, 2), int(1.3 * S): (0, 1), int(1.35 * S): (3, 1),
+                      int(1.4 * S): (3, 0)}
     state = m.ordering.state()
     fresh = CentralMapper(_cfg())
     fresh.ordering.load_state(state)
     _assert_same_state(state, fresh.ordering.state())
     assert not m.add_sightings("robot1", int(1.0 * S), [replace(seen, observer="robot2")])
     done = m.process(flush=True)
-    assert _order(done) == [("robot1", 1.0), ("robot1", 1.2), ("robot1", 1.3), ("robot1", 1.4), ("robot1", 1.6)]
+    assert _order(done) == [("robot1", 1.0), ("robot1", 1.2), ("robot1", 1.3), ("robot1", 1.35), ("robot1", 1.4),
+                            ("robot1", 1.6)]
     assert not m.add_sightings("robot1", int(1.5 * S), [seen])
     assert m.drops == {"unknown_robot": 1, "stale_sighting": 1}
 

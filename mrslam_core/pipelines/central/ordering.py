@@ -169,7 +169,7 @@ class Ordering:
     # ------------------------------------------------------------------ observation sets
     def add_observations(self, obs: ObservationSet) -> bool:
         """Queue an observation set (base_link of ``obs.robot``); False, counted, if dropped.
-        Sightings held for its robot and stamp (:meth:`add_sightings`) join it."""
+        Sightings held or queued alone for its robot and stamp (:meth:`add_sightings`) join it."""
         if obs.robot not in self._odom:
             self.drops["unknown_robot"] += 1
             return False
@@ -179,8 +179,14 @@ class Ordering:
             return False
         key = (obs.robot, int(obs.stamp_ns))
         if key in self._queued:
-            self.drops["duplicate_stamp"] += 1
-            return False
+            i = next(i for i, e in enumerate(self._queue) if (e[3].robot, e[0]) == key)
+            stamp, idx, seq, queued = self._queue[i]
+            if len(queued) or not len(obs):
+                self.drops["duplicate_stamp"] += 1
+                return False
+            # sightings queued alone before their set came (after a newer set of the robot): one set
+            self._queue[i] = (stamp, idx, seq, replace(obs, sightings=obs.sightings + queued.sightings))
+            return True
         held = self._held.pop(key, None)
         if held is not None:
             obs = replace(obs, sightings=obs.sightings + tuple(held))
