@@ -4,12 +4,13 @@ Each robot of :class:`~mrslam_core.frontend.config.FiducialConfig` carries its t
 sides of a cube whose vertical axis stands above its base_link. A tag found in both rectified
 images (OpenCV's ArUco detector, corners refined to sub-pixel) is triangulated corner by corner
 (:func:`~mrslam_core.geometry.stereo.triangulate`); the face's normal comes from its four corners
-in the left image (IPPE for a square of known size); the point measured is the carrier's axis,
-``carrier_half`` behind the face's centre along that normal. Its covariance: the four corners'
-triangulation covariance averaged, plus ``carrier_half`` times the normal's error
-(``normal_sigma_px`` over the face's side in pixels) sideways. Moved into
-base_link, the axis gives the other robot's range and bearing (the same measurement as MR.CLAM's
-robot readings, scored by the filter and used by rendezvous joins).
+in the left image (the poses of a square of known size that fit them, weighted by their
+reprojection errors: :meth:`FiducialDetector.normals`); the point measured is the carrier's
+axis, ``carrier_half`` behind the face's centre along the normal. Its covariance: the four
+corners' triangulation covariance averaged, plus ``carrier_half`` times the normal's error
+(``normal_sigma_px`` over the face's side in pixels) sideways, plus the spread between the poses
+that fit. Moved into base_link, the axis gives the other robot's range and bearing (the same
+measurement as MR.CLAM's robot readings, scored by the filter and used by rendezvous joins).
 
 Frames: pixels (column, row) of the rectified left image; the left optical frame (x right, y down,
 z forward); base_link (x forward, y left, z up). Ranges [m], bearings [rad] counter-clockwise

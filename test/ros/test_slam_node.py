@@ -341,7 +341,10 @@ def test_inputs_whose_publishers_appear_after_the_discovery_wait_still_receive_t
             Parameter("max_wait", value=0.5),
             Parameter("discovery_wait", value=0.1),
         ])
-        assert slam.inputs == [None] * 4
+        # inputs: odometry, sightings, observation sets, each robot7 then robot6; the optional
+        # sightings are subscribed at once (volatile), the rest wait for their publishers
+        assert slam.inputs[:2] == [None] * 2 and slam.inputs[4:] == [None] * 2
+        assert all(sub.qos_profile.durability == DurabilityPolicy.VOLATILE for sub in slam.inputs[2:4])
         feeder = rclpy.create_node("feeder")
         odom = {"robot7": feeder.create_publisher(Odometry, "/robot7/odom", ODOMETRY_HISTORY),
                 "robot6": feeder.create_publisher(Odometry, "/robot6/odom", DEFAULT)}
@@ -363,7 +366,7 @@ def test_inputs_whose_publishers_appear_after_the_discovery_wait_still_receive_t
         while time.time() < end and slam.unsubscribed != ["/robot6/observations"]:  # it has no publisher
             ex.spin_once(timeout_sec=0.05)
         assert slam.inputs[0].qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL
-        assert slam.inputs[1].qos_profile.durability == DurabilityPolicy.VOLATILE and slam.inputs[3] is None
+        assert slam.inputs[1].qos_profile.durability == DurabilityPolicy.VOLATILE and slam.inputs[5] is None
         poses = []
         feeder.create_subscription(PoseWithCovarianceStamped, "/robot7/pose", poses.append, 10)
         for _ in range(20):
@@ -418,14 +421,14 @@ def test_observation_sets_kept_before_the_odometry_are_taken_only_once_it_is_hea
             Parameter("max_wait", value=0.3),
             Parameter("discovery_wait", value=1.0),
         ])
-        assert slam.inputs[0] is not None and slam.inputs[1] is None  # odometry subscribed, sets not yet
+        assert slam.inputs[0] is not None and slam.inputs[2] is None  # odometry subscribed, sets not yet
         ex = SingleThreadedExecutor()
         ex.add_node(slam)
         ex.add_node(feeder)
         end = time.time() + 0.5
         while time.time() < end:
             ex.spin_once(timeout_sec=0.05)
-        assert slam.inputs[1] is None and slam.mapper.queued == 0
+        assert slam.inputs[2] is None and slam.mapper.queued == 0
         for i in range(13):  # stamp i / 10 s, driving 0.1 m per step
             m = Odometry()
             m.header.stamp = ns_to_stamp(i * 100_000_000)
