@@ -101,8 +101,12 @@ class FiducialDetector:
 
     def detect(self, left: np.ndarray, right: np.ndarray) -> TagDetections:
         """Tags in a rectified grey pair (H, W) uint8, as sightings of the robots carrying them."""
-        in_left, in_right = self._find(left), self._find(right)
+        in_left = self._find(left)
         quads = [q for qs in in_left.values() for q in qs]
+        robots = self.cfg.robots
+        # the right image only pairs the left's tags of other robots: not searched without one
+        wanted = any(tag < len(robots) and robots[tag] != self.robot for tag in in_left)
+        in_right = self._find(right) if wanted else {}
         points: dict[int, list[tuple[np.ndarray, np.ndarray]]] = {}
         for tag, lq in in_left.items():
             if tag >= len(self.cfg.robots):

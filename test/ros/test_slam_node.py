@@ -10,6 +10,26 @@ import pytest
 pytestmark = pytest.mark.ros
 
 
+def _matched(slam, feeder, topic: str):
+    """Spin ``slam`` and ``feeder`` until the node has subscribed every input that has a
+    publisher and ``topic`` has a subscriber (at most 10 s); returns ``spin(n)``: n executor turns."""
+    from rclpy.executors import SingleThreadedExecutor
+
+    ex = SingleThreadedExecutor()
+    ex.add_node(slam)
+    ex.add_node(feeder)
+
+    def spin(n=20):
+        for _ in range(n):
+            ex.spin_once(timeout_sec=0.01)
+
+    end = time.time() + 10
+    while time.time() < end and (slam.unsubscribed or feeder.count_subscribers(topic) == 0):
+        spin(1)  # the node subscribes each input once it sees its publishers
+    spin(10)
+    return spin
+
+
 def test_slam_node_tracks_two_robots():
     import rclpy
     from geometry_msgs.msg import PoseWithCovarianceStamped
@@ -165,7 +185,6 @@ def test_bad_input_is_counted_on_diagnostics_and_the_node_keeps_running():
     import rclpy
     from diagnostic_msgs.msg import DiagnosticArray
     from nav_msgs.msg import Odometry
-    from rclpy.executors import SingleThreadedExecutor
     from rclpy.parameter import Parameter
     from rclpy.qos import DurabilityPolicy
     from sensor_msgs.msg import PointCloud2
@@ -191,18 +210,7 @@ def test_bad_input_is_counted_on_diagnostics_and_the_node_keeps_running():
         sightings = feeder.create_publisher(Odometry, "/robot1/sightings", 10)
         diags = []
         feeder.create_subscription(DiagnosticArray, "/diagnostics", diags.append, 10)
-        ex = SingleThreadedExecutor()
-        ex.add_node(slam)
-        ex.add_node(feeder)
-
-        def spin(n=20):
-            for _ in range(n):
-                ex.spin_once(timeout_sec=0.01)
-
-        end = time.time() + 10
-        while time.time() < end and (slam.unsubscribed or feeder.count_subscribers("/robot1/observations") == 0):
-            spin(1)  # the node subscribes each input once it sees its publishers
-        spin(10)
+        spin = _matched(slam, feeder, "/robot1/observations")
         for t in (0, 10**9, 10**9, 5 * 10**8):  # a duplicate and a backwards stamp
             m = Odometry()
             m.header.stamp = ns_to_stamp(t)
@@ -450,7 +458,6 @@ def test_a_sighting_on_its_own_topic_joins_the_observation_set_of_its_stamp():
     observation cloud: the filter gets them in that one set, in either arrival order."""
     import rclpy
     from nav_msgs.msg import Odometry
-    from rclpy.executors import SingleThreadedExecutor
     from rclpy.parameter import Parameter
     from sensor_msgs.msg import PointCloud2
 
@@ -470,18 +477,7 @@ def test_a_sighting_on_its_own_topic_joins_the_observation_set_of_its_stamp():
         odom = {r: feeder.create_publisher(Odometry, f"/{r}/odom", 10) for r in ("robot1", "robot2")}
         clouds = {r: feeder.create_publisher(PointCloud2, f"/{r}/observations", 10) for r in ("robot1", "robot2")}
         seen = feeder.create_publisher(Odometry, "/robot1/sightings", 10)
-        ex = SingleThreadedExecutor()
-        ex.add_node(slam)
-        ex.add_node(feeder)
-
-        def spin(n=20):
-            for _ in range(n):
-                ex.spin_once(timeout_sec=0.01)
-
-        end = time.time() + 10
-        while time.time() < end and (slam.unsubscribed or feeder.count_subscribers("/robot1/sightings") == 0):
-            spin(1)
-        spin(10)
+        spin = _matched(slam, feeder, "/robot1/sightings")
         for t in range(4):
             for r in odom:
                 m = Odometry()

@@ -179,7 +179,7 @@ class Ordering:
             return False
         key = (obs.robot, int(obs.stamp_ns))
         if key in self._queued:
-            i = next(i for i, e in enumerate(self._queue) if (e[3].robot, e[0]) == key)
+            i = self._queued_at(key)
             stamp, idx, seq, queued = self._queue[i]
             if len(queued) or not len(obs):
                 self.drops["duplicate_stamp"] += 1
@@ -207,20 +207,25 @@ class Ordering:
             self.drops["stale_sighting"] += len(sightings)
             return False
         if key in self._queued:
-            for i, (stamp, idx, seq, queued) in enumerate(self._queue):
-                if (queued.robot, stamp) == key:
-                    self._queue[i] = (stamp, idx, seq, replace(queued, sightings=queued.sightings + tuple(sightings)))
+            i = self._queued_at(key)
+            stamp, idx, seq, queued = self._queue[i]
+            self._queue[i] = (stamp, idx, seq, replace(queued, sightings=queued.sightings + tuple(sightings)))
             return True
         if self._latest_obs.get(robot, -1) > stamp_ns:
             return self._queue_set(_sightings_only(robot, stamp_ns, sightings))
         self._held.setdefault(key, []).extend(sightings)
         return True
 
-    def _release_held(self, robot: str, stamp_ns: int) -> None:
-        """Held sightings of ``robot`` older than its set at ``stamp_ns``, whose own set never
-        came (a frame the frontend dropped after measuring them), queued as sets of their own."""
-        for key in sorted(k for k in self._held if k[0] == robot and k[1] < stamp_ns):
-            self._queue_set(_sightings_only(robot, key[1], self._held.pop(key)))
+    def _queued_at(self, key: tuple[str, int]) -> int:
+        """Position in the queue of the set of (robot, stamp) ``key`` (it is queued)."""
+        return next(i for i, e in enumerate(self._queue) if (e[3].robot, e[0]) == key)
+
+    def _release_held(self, robot: str | None = None, stamp_ns: float = np.inf) -> None:
+        """Held sightings of ``robot`` (None: every robot) older than ``stamp_ns``, whose own set
+        never came (a frame the frontend dropped after measuring them, or the end of the input),
+        queued as sets of their own."""
+        for key in sorted(k for k in self._held if robot in (None, k[0]) and k[1] < stamp_ns):
+            self._queue_set(_sightings_only(key[0], key[1], self._held.pop(key)))
 
     def _queue_set(self, obs: ObservationSet) -> bool:
         key = (obs.robot, int(obs.stamp_ns))
@@ -250,8 +255,7 @@ class Ordering:
         after the window's end (or the end is ``max_wait`` older than the newest set). With
         ``flush`` held sightings go as sets of their own first."""
         if flush:
-            for key in sorted(self._held):
-                self._queue_set(_sightings_only(key[0], key[1], self._held.pop(key)))
+            self._release_held()
         while self._queue and more():
             if self._step_ns:
                 window = self._due_window(flush)
