@@ -75,7 +75,6 @@ class ExploreNodeConfig:
 
 #: the controller's counters (Controller.counters) the node logs as they grow: (name, as a warning, what happened)
 EVENTS = (
-    ("stalls", True, "a robot stalled (commanded forward, did not move): backing off; stalls"),
     ("boxed_in", True, "a robot can reach no frontier from where it stands: recovering; times"),
     ("long_turns", False, "a robot turns the long way round, away from a wall (open_side_turns); such turns"),
     ("turn_backoffs", False, "a robot backs away from a wall before turning on the spot (turn_clearance); such turns"),

@@ -47,14 +47,6 @@ class ControlConfig:
             body's corners swing out to the platform's ``corner_radius``) and turns the other
             way round instead, once per turn; counted as ``blocked_turns`` (0: off) [s].
         turn_stall_angle: see ``turn_stall_time`` [rad] (5°).
-        stall_time: a robot commanded forward for this long (at 0.1 m/s or more on average) that
-            covered less than a quarter of the commanded distance is blocked by something its
-            sensor does not show (a wall nearer than a stereo camera's near limit, a door frame
-            beside it): its goal fails and it backs off at once instead of pushing for
-            ``ExplorationConfig.progress_timeout``, and a disc of radius ``bumper_range / 2``
-            around the spot the platform's ``bumper_range`` ahead of it is an obstacle (inflated
-            by ``ExplorationConfig.robot_radius``) for planning during
-            ``ExplorationConfig.blacklist_period``; counted as ``stalls`` (0: off) [s].
         recovery_time, recovery_speed: a robot that made no headway (or can reach no target from
             where it stands: ``boxed_in``) drives straight this long at this speed before its next
             goal, backward, or forward when its last recovery did not move it (a wedged robot
@@ -76,7 +68,6 @@ class ControlConfig:
     back_margin: float = 0.1
     turn_stall_time: float = 1.5
     turn_stall_angle: float = float(np.radians(5.0))
-    stall_time: float = 0.0
     recovery_time: float = 2.0
     recovery_speed: float = 0.15
 

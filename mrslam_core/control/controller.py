@@ -39,14 +39,11 @@ class Controller:
                 self.follower.end_turn(name)
             else:
                 commands[name] = self.follower.command(name, grid, np.asarray(poses[name], float), path, now)
-        for name, (v, _) in commands.items():
-            self.recovery.record(name, poses[name], v, now)
         return commands
 
     def counters(self) -> dict[str, int]:
-        """How often each event happened so far: ``stalls``, ``boxed_in`` (see
-        :class:`Recovery`), ``long_turns``, ``turn_backoffs``, ``blocked_turns`` (see
+        """How often each event happened so far: ``boxed_in`` (see :class:`Recovery`), ``long_turns``, ``turn_backoffs``, ``blocked_turns`` (see
         :class:`Follower`)."""
         f, r = self.follower, self.recovery
-        return {"stalls": r.stalls, "boxed_in": r.boxed_in, "long_turns": f.long_turns,
+        return {"boxed_in": r.boxed_in, "long_turns": f.long_turns,
                 "turn_backoffs": f.turn_backoffs, "blocked_turns": f.blocked_turns}

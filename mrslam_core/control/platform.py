@@ -23,8 +23,6 @@ class PlatformConfig:
         front: distance from the axle (base_link) forward to the front of the body [m].
         rear: distance from the axle (base_link) back to the rear of the body [m].
         width: the body's width [m].
-        bumper_range: distance ahead of the robot's centre (base_link) at which it touches
-            what it drives into (at least ``front``) [m].
         camera_near: the camera's near limit, from base_link: obstacles nearer than this ahead
             of the axle are not seen (a stereo head sees nothing nearer than f·b / its largest
             disparity, from the cameras, which sit ahead of the axle). The simulated head: 0.12 m
@@ -36,7 +34,6 @@ class PlatformConfig:
     front: float = 0.185
     rear: float = 0.265
     width: float = 0.38
-    bumper_range: float = 0.3
     camera_near: float = 0.34
 
     def __post_init__(self) -> None:
@@ -45,8 +42,6 @@ class PlatformConfig:
         if not (self.front > -self.rear and self.width > 0):
             raise ValueError(f"the footprint needs front > -rear and width > 0, got front {self.front}, "
                              f"rear {self.rear}, width {self.width}")
-        if not self.bumper_range >= self.front:
-            raise ValueError(f"bumper_range {self.bumper_range} m must be >= front {self.front} m")
         if not self.camera_near >= 0:
             raise ValueError("camera_near must be >= 0")
 

@@ -81,18 +81,9 @@ class ExplorationConfig:
         progress_timeout: a goal with no progress for this long is blacklisted, and the robot
             recovers (``ControlConfig.recovery_time``) [s].
         blacklist_radius: frontier cells within this of a blacklisted goal are skipped [m].
-        blacklist_period: a failed goal is skipped for this long, then tried again; a bumper
-            hit (``ControlConfig.stall_time``) is an obstacle for as long [s].
+        blacklist_period: a failed goal is skipped for this long, then tried again [s].
         max_strikes: after this many failures at one place it is skipped for good.
         return_to_start: drive back to the start pose once exploration is complete.
-        unknown_passable: paths and travel costs may cross cells never observed (right for a
-            sensor that sees every obstacle before the robot reaches it). False: only cells
-            observed free (for stereo cameras, which cannot see a wall nearer than their near
-            limit and would otherwise plan through it once they stand close to it).
-        unknown_cost: with ``unknown_passable``, a path's step into a cell never observed costs
-            this many times a step into an observed one (>= 1; 1: no difference): paths keep to
-            space seen free where the detour is short, instead of cutting across the unseen
-            ground beside the robot, where a stereo camera looking ahead has not seen the wall.
         start_delay: each robot stands still this long from its first pose on, so that the map
             is started from the known start poses: before a robot's first landmarks nothing can
             tell its particles' motion noise apart, and the landmarks it maps first fix the
@@ -115,10 +106,4 @@ class ExplorationConfig:
     blacklist_period: float = 30.0
     max_strikes: int = 3
     return_to_start: bool = False
-    unknown_passable: bool = True
-    unknown_cost: float = 1.0
     start_delay: float = 0.0
-
-    def __post_init__(self) -> None:
-        if not self.unknown_cost >= 1.0:
-            raise ValueError("unknown_cost must be >= 1")

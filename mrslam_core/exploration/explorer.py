@@ -40,15 +40,6 @@ def surroundings(grid: OccupancyGrid, xy: np.ndarray, robot_radius: float) -> np
     return (rr - r0) ** 2 + (cc - c0) ** 2 <= (robot_radius / grid.res + 2) ** 2
 
 
-def disc_cells(grid: OccupancyGrid, centres: list[np.ndarray], radius: float) -> np.ndarray:
-    """(H, W) bool: the cells within ``radius`` [m] of any of ``centres``, each (x, y) [m] map
-    frame (bumper hits)."""
-    out = np.zeros(grid.shape, bool)
-    for xy in centres:
-        out |= surroundings(grid, xy, radius - 2 * grid.res)
-    return out
-
-
 def reaches_any(passable: np.ndarray, start: tuple[int, int], cells: np.ndarray) -> bool:
     """Whether any of ``cells`` (T, 2) (row, col) lies in the 8-connected region of ``passable``
     (H, W) bool that holds ``start`` (row, col); cells off the grid never do."""
@@ -61,27 +52,14 @@ def reaches_any(passable: np.ndarray, start: tuple[int, int], cells: np.ndarray)
     return bool(np.any(labels[rc[:, 0], rc[:, 1]] == own))
 
 
-def planning_layers(grid: OccupancyGrid, poses: list[np.ndarray], cfg: ExplorationConfig,
-                    bumps: list[np.ndarray] = (), bump_radius: float = 0.0,
-                    unseen: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+def planning_layers(grid: OccupancyGrid, cfg: ExplorationConfig) -> tuple[np.ndarray, np.ndarray]:
     """What paths may cross: (passable (H, W) bool for A*, occupancy (H, W) for the travel cost).
 
-    Obstacles (occupied cells, and discs of ``bump_radius`` [m] round ``bumps``, each (x, y) [m]
-    map frame, see :func:`disc_cells`) are inflated by ``robot_radius``. Without
-    ``unknown_passable`` only cells observed free are passable and unobserved ones cost like
-    obstacles, except within the robot's radius, or ``unseen`` [m] (the camera's near limit)
-    where that is larger, + 2 cells of a robot's pose (x, y, θ): the ground under and just
-    around a robot is never in view, and it must be able to leave it.
+    Occupied cells are inflated by ``robot_radius``; cells never observed are passable.
     """
-    blocked = grid.occupied() | disc_cells(grid, list(bumps), bump_radius)
+    blocked = grid.occupied()
     prob = np.where(blocked, 1.0, grid.probability())
     passable = ~inflate(blocked, cfg.robot_radius / grid.res)
-    if not cfg.unknown_passable:
-        around = np.zeros(grid.shape, bool)
-        for pose in poses:
-            around |= surroundings(grid, np.asarray(pose)[:2], max(cfg.robot_radius, unseen))
-        passable &= grid.free() | (around & ~blocked)
-        prob = np.where(grid.observed | around, prob, 1.0)
     return passable, prob
 
 
@@ -91,9 +69,9 @@ class Explorer:
 
     Call :meth:`step` with the current grid, every robot's pose (map frame) and the time; it
     (re)assigns targets when due and returns each robot's (v, ω) command from ``controller``
-    (which counts the stalls, recoveries and turns). The grid may grow between calls (its cell
-    (0, 0) moves): everything kept from one call to the next (targets, paths, blacklist, bumper
-    hits, checkpoints) is in metres, map frame, never grid cells.
+    (which counts the recoveries and turns). The grid may grow between calls (its cell
+    (0, 0) moves): everything kept from one call to the next (targets, paths, blacklist,
+    checkpoints) is in metres, map frame, never grid cells.
 
     Raises:
         ValueError: ``config.robot_radius`` is smaller than the controller's platform's
@@ -113,10 +91,6 @@ class Explorer:
     plans: int = 0
     checkpoints: dict[str, tuple[np.ndarray, float]] = field(default_factory=dict)
     known_at_plan: int = 0
-    #: bumper hits (see ``ControlConfig.stall_time``): (x, y) [m] map frame, obstacles for
-    #: planning until ``bump_until`` [s]
-    bumps: list[np.ndarray] = field(default_factory=list)
-    bump_until: list[float] = field(default_factory=list)
     #: per robot, the time of its first pose [s] (``start_delay``)
     first_seen: dict[str, float] = field(default_factory=dict)
     #: the candidate targets of the last plan, one per frontier stretch (T, 2) [m] map frame
@@ -135,8 +109,7 @@ class Explorer:
         self.plans += 1
         self.last_plan_s = now
         self.known_at_plan = int(grid.observed.sum())
-        passable, prob = planning_layers(grid, [poses[n] for n in self.robots], cfg, self.bumps, self._bump_radius,
-                                         self._unseen)
+        passable, prob = planning_layers(grid, cfg)
         frontier &= passable  # a frontier the robot cannot stand on (hugging a wall) is not a goal
         waiting = False  # a frontier blocked only for now will be tried again: not complete yet
         if self.blacklist:
@@ -191,9 +164,8 @@ class Explorer:
         # leave through inflated cells around it (never through occupied ones)
         cfg = self.config
         near = surroundings(grid, poses[name][:2], max(cfg.robot_radius, self._unseen))
-        leave = near & ~grid.occupied() & ~disc_cells(grid, self.bumps, self._bump_radius)
-        cost = np.where(grid.observed, 1.0, cfg.unknown_cost) if cfg.unknown_cost > 1 else None
-        path = astar(passable | leave, start, goal, cost)
+        leave = near & ~grid.occupied()
+        path = astar(passable | leave, start, goal)
         if path is None:
             self.goals[name] = None
             if reaches_any(passable | leave, start, grid.cell_of(np.asarray(targets, float).reshape(-1, 2))):
@@ -209,11 +181,6 @@ class Explorer:
         """Radius [m] round a robot that its camera never sees: the platform's ``camera_near``."""
         return self.controller.config.platform.camera_near
 
-    @property
-    def _bump_radius(self) -> float:
-        """Radius [m] of the obstacle disc round a bumper hit."""
-        return self.controller.config.platform.bumper_range / 2
-
     def _strike(self, target: np.ndarray, now: float) -> None:
         """A goal failed (no path, or no headway): block it for a while; after ``max_strikes``
         failures at the same place, for good (so exploration neither hangs nor stops early)."""
@@ -227,23 +194,12 @@ class Explorer:
         self.blacklist.append(np.asarray(target, float))
         self.strikes.append([1.0, now + cfg.blacklist_period])
 
-    def _stalled(self, name: str, poses: dict[str, np.ndarray], now: float) -> bool:
-        """Whether ``name`` stalled (see ``ControlConfig.stall_time``); where it touched a wall is
-        an obstacle for planning for ``blacklist_period``."""
-        stalled, bump = self.controller.recovery.stalled(name, poses, now)
-        if bump is not None:
-            self.bumps.append(bump)
-            self.bump_until.append(now + self.config.blacklist_period)
-        return stalled
-
     def step(self, grid: OccupancyGrid, poses: dict[str, np.ndarray], now: float) -> dict[str, tuple[float, float]]:
         """Commands (v [m/s], ω [rad/s]) per robot at time ``now`` [s]."""
         cfg = self.config
         for name in self.robots:
             self.starts.setdefault(name, np.asarray(poses[name], float).copy())
             self.first_seen.setdefault(name, now)
-        live = [i for i, until in enumerate(self.bump_until) if now < until]
-        self.bumps, self.bump_until = [self.bumps[i] for i in live], [self.bump_until[i] for i in live]
         due = now - self.last_plan_s >= cfg.replan_period
         known = int(grid.observed.sum())
         if known - self.known_at_plan > cfg.replan_new_area / grid.res**2 and now - self.last_plan_s >= 1.0:
@@ -261,7 +217,7 @@ class Explorer:
                 self.goals[name] = None
             elif np.linalg.norm(poses[name][:2] - where) > 0.3:
                 self.checkpoints[name] = (poses[name][:2].copy(), now)
-            elif now - since > cfg.progress_timeout or self._stalled(name, poses, now):
+            elif now - since > cfg.progress_timeout:
                 # no headway for a while (blocked, or oscillating): never chase this goal again
                 self._strike(g.target, now)
                 self.goals[name] = None

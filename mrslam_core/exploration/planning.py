@@ -18,13 +18,9 @@ def inflate(blocked: np.ndarray, radius_cells: float) -> np.ndarray:
     return ndimage.distance_transform_edt(~blocked) <= radius_cells
 
 
-def astar(passable: np.ndarray, start: tuple[int, int], goal: tuple[int, int],
-          cost: np.ndarray | None = None) -> list[tuple[int, int]] | None:
+def astar(passable: np.ndarray, start: tuple[int, int], goal: tuple[int, int]) -> list[tuple[int, int]] | None:
     """Shortest 8-connected path of cells from start to goal over ``passable`` (H, W) bool, with
-    the octile distance as heuristic; None when the goal cannot be reached.
-
-    ``cost`` (H, W), each >= 1: a step into a cell costs its length times the cell's cost
-    (default 1 everywhere), so the heuristic stays admissible."""
+    the octile distance as heuristic; None when the goal cannot be reached."""
     h, w = passable.shape
     if not (0 <= goal[0] < h and 0 <= goal[1] < w) or not passable[goal]:
         return None
@@ -53,7 +49,7 @@ def astar(passable: np.ndarray, start: tuple[int, int], goal: tuple[int, int],
         for dr, dc, step in _MOVES:
             nr, nc = r + dr, c + dc
             if 0 <= nr < h and 0 <= nc < w and passable[nr, nc] and not closed[nr, nc]:
-                ng = gcost + (step if cost is None else step * cost[nr, nc])
+                ng = gcost + step
                 if ng < g[nr, nc]:
                     g[nr, nc] = ng
                     parent[nr, nc] = r * w + c

@@ -96,12 +96,6 @@ class FrontendConfig:
         harris_block_size: Harris window [px].
         harris_k: Harris k.
         harris_quality: corners weaker than this fraction of the strongest are dropped.
-        harris_cell_floor: 0: that strongest is the whole image's. > 0: each cell of the
-            ``grid_cols`` x ``grid_rows`` grid also keeps the corners above ``harris_quality`` times
-            its own strongest, as long as they exceed this fraction of the image's strongest. Harris
-            responses grow with the fourth power of contrast: a dim textured surface in half of the
-            view (a desk a robot turns beside) loses every corner to a high-contrast one in the
-            other half (a checkered wall) under one threshold.
         nms_radius: non-maximum suppression radius of Harris corners [px].
         usurf_scale: SURF scale s for detectors without a scale (Harris); window 20s [px].
         min_disparity: smallest disparity searched [px] (far limit).
@@ -169,7 +163,6 @@ class FrontendConfig:
     harris_block_size: int = 3
     harris_k: float = 0.04
     harris_quality: float = 0.01
-    harris_cell_floor: float = 0.0
     nms_radius: int = 4
     usurf_scale: float = 1.2
     min_disparity: int = 1
@@ -239,8 +232,6 @@ class FrontendConfig:
             raise ValueError("track_ratio must be in (0, 1]")
         if self.track_descriptor_gate is not None and not 0.0 <= self.track_descriptor_gate <= 4.0:
             raise ValueError("track_descriptor_gate must be in [0, 4] (unit descriptors)")
-        if not 0.0 <= self.harris_cell_floor <= self.harris_quality:
-            raise ValueError("harris_cell_floor must be in [0, harris_quality] (0: off)")
         if not 0.0 <= self.min_depth < self.max_depth:
             raise ValueError("need 0 <= min_depth < max_depth")
         if self.obstacle_min_height >= self.obstacle_max_height:

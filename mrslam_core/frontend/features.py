@@ -48,25 +48,21 @@ class Keypoints:
 
 
 def harris(image: np.ndarray, cfg: FrontendConfig, margin: int) -> Keypoints:
-    """Harris corners: response map, non-maximum suppression, relative threshold (the image's
-    strongest, or each grid cell's: ``harris_cell_floor``), at most ``max_features`` spread over
+    """Harris corners: response map, non-maximum suppression, relative threshold (of the image's
+    strongest), at most ``max_features`` spread over
     the ``grid_cols`` x ``grid_rows`` grid (each cell's strongest first, round-robin), strongest
     first.
 
     Args:
         image: (H, W) uint8.
-        cfg: block size, k, quality, cell floor and grid, NMS radius and max_features are used.
+        cfg: block size, k, quality, grid, NMS radius and max_features are used.
         margin: corners closer than this to the border are dropped [px].
     """
     resp = cv2.cornerHarris(image, cfg.harris_block_size, 3, cfg.harris_k)
     side = 2 * cfg.nms_radius + 1
     peak = resp >= cv2.dilate(resp, np.ones((side, side), np.uint8))
     top = max(float(resp.max()), 1e-12)
-    if cfg.harris_cell_floor > 0:
-        peak &= resp > np.maximum(cfg.harris_quality * _cell_max(resp, cfg.grid_cols, cfg.grid_rows),
-                                  cfg.harris_cell_floor * top)
-    else:
-        peak &= resp > cfg.harris_quality * top
+    peak &= resp > cfg.harris_quality * top
     peak[:margin] = False
     peak[-margin:] = False
     peak[:, :margin] = False
@@ -80,16 +76,6 @@ def harris(image: np.ndarray, cfg: FrontendConfig, margin: int) -> Keypoints:
     order = np.argsort(-strength, kind="stable")
     xy = np.stack([cols[order], rows[order]], axis=1).astype(float)
     return Keypoints(xy, strength[order].astype(float), np.zeros(order.size))
-
-
-def _cell_max(values: np.ndarray, cols: int, rows: int) -> np.ndarray:
-    """(H, W) array holding at each pixel the largest of ``values`` (H, W) in its cell of a
-    ``cols`` x ``rows`` grid (cell edges at round(k·W/cols), round(k·H/rows))."""
-    h, w = values.shape
-    r = np.rint(np.linspace(0, h, rows + 1)).astype(int)
-    c = np.rint(np.linspace(0, w, cols + 1)).astype(int)
-    top = np.maximum.reduceat(np.maximum.reduceat(values, r[:-1], axis=0), c[:-1], axis=1)
-    return np.repeat(np.repeat(top, np.diff(r), axis=0), np.diff(c), axis=1)
 
 
 def _from_cv(kps: list, image_shape: tuple[int, int], margin: int) -> Keypoints:

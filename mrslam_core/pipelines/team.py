@@ -212,8 +212,8 @@ class _OdometryFeed:
 
 def write_team_run(out: str | Path, cfg: TeamConfig, res: dict) -> dict:
     """The run folder of a :func:`run` result (``evaluation.report.write_run``); returns the report."""
-    counters = ("explored_fraction", "dropped", "frontend_drops", "wall_s", "exploration_state", "stalls",
-                "boxed_in", "long_turns", "turn_backoffs", "blocked_turns", "outlier_matches", "map_checks",
+    counters = ("explored_fraction", "dropped", "frontend_drops", "wall_s", "exploration_state", "boxed_in",
+                "long_turns", "turn_backoffs", "blocked_turns", "outlier_matches", "map_checks",
                 "relocalizations", "sightings")
     return write_run(out, res["trajectories"], cfg, res["update_ms"], res["landmarks"],
                      extra={k: res[k] for k in counters}, occupancy=res["occupancy"])

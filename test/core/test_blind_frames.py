@@ -37,7 +37,7 @@ def test_frames_are_rendered_at_the_camera_rate_and_counted_by_stage(small_run):
 
 
 def test_frontend_changes_are_typed_and_checked():
-    cfg = blind_frames.overrides(FrontendConfig(), ["harris_cell_floor=1e-5", "max_disparity=128"])
-    assert cfg.harris_cell_floor == 1e-5 and cfg.max_disparity == 128
+    cfg = blind_frames.overrides(FrontendConfig(), ["harris_quality=0.001", "max_disparity=128"])
+    assert cfg.harris_quality == 0.001 and cfg.max_disparity == 128
     with pytest.raises(SystemExit, match="FrontendConfig key"):
         blind_frames.overrides(cfg, ["no_such_key=1"])

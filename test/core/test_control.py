@@ -160,31 +160,6 @@ def test_a_turn_that_does_not_turn_is_reversed_after_the_stall_time(wall_south):
         assert f.blocked_turns == int(reversed_)
 
 
-def test_a_robot_commanded_forward_that_does_not_move_stalls_after_the_stall_time():
-    """Commanded 0.3 m/s every 0.2 s and standing still at (1, 2) facing north: at 1.4 s it has
-    been commanded for less than ``stall_time`` (1.5 s); at 1.6 s it stalled, and what stopped it
-    is ``bumper_range`` ahead. Against a teammate 0.7 m away (within 2 · 0.3 + 0.2 m) it stalls
-    with no wall to mark; a robot that covered more than a quarter of the distance did not stall."""
-    pose = np.array([1.0, 2.0, np.pi / 2])
-    for platform, bump in ((PlatformConfig(), [1.0, 2.3]), (PlatformConfig(bumper_range=0.5), [1.0, 2.5])):
-        rec = Recovery(ControlConfig(stall_time=1.5, platform=platform))
-        for i in range(8):  # 0 ... 1.4 s
-            assert rec.stalled("r", {"r": pose}, 0.2 * i) == (False, None)
-            rec.record("r", pose, 0.3, 0.2 * i)
-        stalled, where = rec.stalled("r", {"r": pose}, 1.6)
-        assert stalled and rec.stalls == 1 and len(rec.motion["r"]) == 0
-        np.testing.assert_allclose(where, bump, atol=1e-12)
-    rec = Recovery(ControlConfig(stall_time=1.5))
-    for i in range(8):
-        rec.record("r", pose, 0.3, 0.2 * i)
-    assert rec.stalled("r", {"r": pose, "mate": np.array([1.0, 2.7, 0.0])}, 1.6) == (True, None)
-    rec = Recovery(ControlConfig(stall_time=1.5))
-    for i in range(8):
-        rec.record("r", pose, 0.3, 0.2 * i)
-    assert rec.stalled("r", {"r": pose + [0.0, 0.15, 0.0]}, 1.6) == (False, None)  # 0.15 m of 0.48 m
-    assert Recovery(ControlConfig()).stalled("r", {"r": pose}, 10.0) == (False, None)  # stall_time 0: off
-
-
 def test_a_recovery_drives_straight_back_then_forward_if_it_did_not_move():
     rec = Recovery(ControlConfig(recovery_time=2.0, recovery_speed=0.2))
     pose = np.array([1.0, 2.0, 0.0])
@@ -207,7 +182,7 @@ def test_the_controller_drives_a_recovery_unless_everyone_halts(wall_south):
     ctl.recovery.start("robot1", me, 0.0)
     assert ctl.step(wall_south(), poses, paths, 0.2) == {"robot1": (-0.15, 0.0), "robot2": (0.0, 0.0)}
     assert ctl.step(wall_south(), poses, paths, 0.4, halt=True) == {"robot1": (0.0, 0.0), "robot2": (0.0, 0.0)}
-    assert ctl.counters() == {"stalls": 0, "boxed_in": 0, "long_turns": 0, "turn_backoffs": 0, "blocked_turns": 0}
+    assert ctl.counters() == {"boxed_in": 0, "long_turns": 0, "turn_backoffs": 0, "blocked_turns": 0}
 
 
 def _imports(path: Path) -> set[str]:
@@ -240,15 +215,14 @@ def test_simulation_exploration_and_control_do_not_import_each_other(package, fo
 
 def test_the_platform_footprint_and_near_limit():
     """The default footprint is the simulated Pioneer's body: 0.45 × 0.38 m, its centre 0.04 m
-    behind base_link, its corners hypot(0.265, 0.19) = 0.326 m from it; a footprint with no area,
-    a bumper inside the body and a back-off before turns that ends inside the camera's near
-    limit are refused."""
+    behind base_link, its corners hypot(0.265, 0.19) = 0.326 m from it; a footprint with no area
+    and a back-off before turns that ends inside the camera's near limit are refused."""
     p = PlatformConfig()
     assert (p.length, p.width, p.centre_x) == pytest.approx((0.45, 0.38, -0.04))
     assert p.corner_radius == pytest.approx(np.hypot(0.265, 0.19))
-    long_nose = PlatformConfig(front=0.5, rear=0.1, width=0.2, bumper_range=0.6)
+    long_nose = PlatformConfig(front=0.5, rear=0.1, width=0.2)
     assert long_nose.corner_radius == pytest.approx(np.hypot(0.5, 0.1))
-    for bad in ({"width": 0.0}, {"front": -0.3, "rear": 0.2}, {"bumper_range": 0.1}, {"camera_near": -0.1}):
+    for bad in ({"width": 0.0}, {"front": -0.3, "rear": 0.2}, {"camera_near": -0.1}):
         with pytest.raises(ValueError):
             PlatformConfig(**bad)
     with pytest.raises(ValueError, match="near limit"):

@@ -232,9 +232,9 @@ def test_a_key_left_out_of_a_section_keeps_the_parents_default(case, pick):
 
 
 def test_a_partial_team_filter_section_keeps_the_team_filter():
-    cfg = from_dict(TeamConfig, {"filter": {"seed": 7}, "control": {"stall_time": 1.0, "platform": {"rear": 0.2}}})
-    assert cfg.filter.seed == 7 and cfg.control.stall_time == 1.0 and cfg.control.platform.rear == 0.2
+    cfg = from_dict(TeamConfig, {"filter": {"seed": 7}, "control": {"recovery_time": 1.0, "platform": {"rear": 0.2}}})
+    assert cfg.filter.seed == 7 and cfg.control.recovery_time == 1.0 and cfg.control.platform.rear == 0.2
     assert cfg.filter == dataclasses.replace(TeamConfig().filter, seed=7)  # not FilterConfig(seed=7)
     team = TeamConfig().control  # the team profile's platform speeds stay
     platform = dataclasses.replace(team.platform, rear=0.2)
-    assert cfg.control == dataclasses.replace(team, stall_time=1.0, platform=platform)
+    assert cfg.control == dataclasses.replace(team, recovery_time=1.0, platform=platform)

@@ -148,12 +148,10 @@ def test_grid_from_the_frontends_obstacle_scan():
     assert grid.occupied().sum() == 1 and grid.free().sum() > 20
 
 
-@pytest.mark.parametrize("unknown_passable", [True, False])
-def test_paths_through_unobserved_cells_only_where_allowed(unknown_passable):
+def test_paths_cross_unobserved_cells():
     """Observed free: a U from the robot at (0.5, 0.5) east along y = 0.5, north along x = 5.5
     and back west along y = 3.5 to (0.5, 3.5); the straight way north (x = 0.5) was never
-    observed. A stereo robot must not plan through it (a wall there would be invisible to it once
-    it stands close); a sensor that sees every wall may."""
+    observed, and the path takes it (unobserved cells are passable, at the unknown occupancy 0.5)."""
     from mrslam_core.exploration.explorer import planning_layers
 
     grid = OccupancyGrid(GridConfig(resolution=0.1), extent=((0.0, 0.0), (6.0, 4.0)))
@@ -163,20 +161,13 @@ def test_paths_through_unobserved_cells_only_where_allowed(unknown_passable):
     free[30:39, 1:59] = True  # y 3.0-3.9
     grid.observed[free] = True
     grid.logodds[free] = -3.0
-    cfg = ExplorationConfig(robot_radius=0.2, unknown_passable=unknown_passable)
     robot = np.array([0.5, 0.5, 0.0])
-    passable, prob = planning_layers(grid, [robot], cfg)
+    passable, prob = planning_layers(grid, ExplorationConfig(robot_radius=0.2))
     start, goal = tuple(grid.cell_of(robot[:2])), tuple(grid.cell_of(np.array([0.5, 3.5])))
     path = np.array(astar(passable, start, goal))
     xy = grid.centre_of(path)
-    if unknown_passable:
-        assert len(path) == 31 and xy[:, 0].max() < 0.6  # straight north
-        assert prob[20, 5] == 0.5
-    else:
-        assert xy[:, 0].max() > 4.9  # round the U
-        far = np.linalg.norm(xy - robot[:2], axis=1) > cfg.robot_radius + 0.2
-        assert grid.observed[tuple(path[far].T)].all()  # seen cells only, beyond the robot's own surroundings
-        assert prob[20, 5] == 1.0 and prob[6, 6] < 0.1  # unobserved costs like an obstacle
+    assert len(path) == 31 and xy[:, 0].max() < 0.6  # straight north
+    assert prob[20, 5] == 0.5 and prob[6, 6] < 0.1
 
 
 def _open_room() -> OccupancyGrid:
@@ -185,36 +176,6 @@ def _open_room() -> OccupancyGrid:
     grid.observed[:, :40] = True
     grid.logodds[:, :40] = -3.0
     return grid
-
-
-def test_a_stalled_robot_marks_a_bumper_hit_backs_off_and_plans_around_it():
-    """A robot at (0.5, 2.0) facing east, commanded forward, does not move (an unseen wall): after
-    stall_time it backs off, its goal has failed once, the spot 0.3 m ahead of it is an obstacle
-    until blacklist_period has passed, and its next path to the frontier goes round it."""
-    from mrslam_core.exploration.explorer import Explorer, planning_layers
-
-    grid = _open_room()
-    cfg = ExplorationConfig(robot_radius=0.2, min_target_distance=0.5)
-    ctl = ControlConfig(stall_time=1.5, platform=replace(SMALL, bumper_range=0.3))
-    ex = Explorer(cfg, ["r"], Controller(ctl))
-    pose = np.array([0.5, 2.0, 0.0])
-    cmds = [ex.step(grid, {"r": pose}, 0.2 * i)["r"] for i in range(9)]  # 0 … 1.6 s
-    assert all(v > 0.1 for v, _ in cmds[:8]), cmds
-    assert cmds[8] == (-ctl.recovery_speed, 0.0)  # stalled at 1.6 s (> 1.5 s commanded): backs off
-    assert len(ex.bumps) == 1 and ex.strikes[0][0] == 1 and ex.controller.recovery.stalls == 1
-    np.testing.assert_allclose(ex.bumps[0], [0.8, 2.0])
-    passable, prob = planning_layers(grid, [pose], cfg, ex.bumps, 0.15)
-    assert not passable[grid.cell_of(np.array([0.8, 2.0]))[0], 8] and prob[20, 8] == 1.0
-    t = 0.2 * 9
-    while t < ctl.recovery_time + 2.0:
-        ex.step(grid, {"r": pose}, t)
-        t += 0.2
-    goal = ex.goals["r"]
-    assert goal is not None
-    d = np.linalg.norm(goal.path - ex.bumps[0], axis=1)
-    assert d.min() >= 0.15, d.min()  # round the bumper hit (bumper_range / 2), not through it
-    ex.step(grid, {"r": pose}, 1.6 + cfg.blacklist_period)
-    assert ex.bumps == []
 
 
 def test_a_robot_that_could_not_back_off_pulls_forward_next_time():
@@ -281,17 +242,17 @@ def test_reaches_any_follows_the_region_that_holds_the_start():
     assert not reaches_any(passable, (0, 0), np.zeros((0, 2), np.int64))
 
 
-def test_a_robot_that_follows_its_commands_never_stalls():
+def test_a_robot_that_follows_its_commands_reaches_the_frontier_without_a_strike():
     from mrslam_core.exploration.explorer import Explorer
 
     grid = _open_room()
     ex = Explorer(ExplorationConfig(robot_radius=0.2, min_target_distance=0.5), ["r"],
-                  Controller(ControlConfig(stall_time=1.5, platform=SMALL)))
+                  Controller(ControlConfig(platform=SMALL)))
     pose = np.array([0.5, 2.0, 0.0])
     for i in range(40):
         v, w = ex.step(grid, {"r": pose}, 0.2 * i)["r"]
         pose = pose + 0.2 * np.array([v * np.cos(pose[2]), v * np.sin(pose[2]), w])
-    assert ex.bumps == [] and ex.strikes == [] and pose[0] > 2.0
+    assert ex.strikes == [] and pose[0] > 2.0
 
 
 def test_robots_stand_still_at_the_start_for_start_delay():
@@ -307,23 +268,6 @@ def test_robots_stand_still_at_the_start_for_start_delay():
     assert all(c == (0.0, 0.0) for c in cmds[:5]), cmds
     assert cmds[5][0] > 0.1 and cmds[6][0] > 0.1, cmds
     assert ex.goals["r"] is not None  # the goal was planned while it waited
-
-
-def test_a_cost_on_unseen_cells_keeps_the_path_in_seen_space():
-    # from (5, 0) to (5, 10): the straight row 5 is unseen from column 2 to 8; rows 0-1 are seen
-    passable = np.ones((11, 11), bool)
-    seen = np.zeros((11, 11), bool)
-    seen[:2] = True
-    seen[:, :2] = True
-    seen[:, 9:] = True
-    straight = astar(passable, (5, 0), (5, 10))
-    assert len(straight) == 11 and all(r == 5 for r, _ in straight)
-    detour = astar(passable, (5, 0), (5, 10), np.where(seen, 1.0, 3.0))
-    assert len(detour) == 15 and not any(not seen[c] for c in detour)  # 3 + 7 + 3 steps around
-    # a cost of 1.5: 7 unseen cells (10.5) are cheaper than the 14 steps of the detour
-    assert astar(passable, (5, 0), (5, 10), np.where(seen, 1.0, 1.5)) == straight
-    with pytest.raises(ValueError):
-        ExplorationConfig(unknown_cost=0.5)
 
 
 def test_the_follower_backs_away_then_turns_without_checking_again(wall_south):
@@ -379,18 +323,16 @@ def test_a_turn_on_the_spot_that_does_not_turn_goes_the_other_way_round_once(wal
 
 
 def test_the_explorer_inflates_by_at_least_the_platform_and_leaves_its_unseen_ground():
-    """robot_radius below the platform's corner_radius is refused. Without unknown_passable a
-    robot may leave through the unobserved ground within max(robot_radius, camera_near) + 2
-    cells of it: its camera never saw it."""
-    from mrslam_core.exploration.explorer import Explorer, planning_layers
+    """robot_radius below the platform's corner_radius is refused. A robot may leave through the
+    inflated cells within max(robot_radius, camera_near) + 2 cells of it (``surroundings``): its
+    camera never saw that ground."""
+    from mrslam_core.exploration.explorer import Explorer, surroundings
 
     with pytest.raises(ValueError, match="corner_radius"):
         Explorer(ExplorationConfig(robot_radius=0.3), ["r"])  # the Pioneer's corners: 0.326 m
     grid = OccupancyGrid(GridConfig(resolution=0.1), extent=((0.0, 0.0), (6.0, 4.0)))
-    cfg = ExplorationConfig(robot_radius=0.2, unknown_passable=False)
-    robot = np.array([2.05, 2.05, 0.0])
-    near, _ = planning_layers(grid, [robot], cfg)
-    wide, _ = planning_layers(grid, [robot], cfg, unseen=0.5)
-    # nothing observed: passable are the cells whose centres lie within 0.2 m + 2 cells = 4 cells
-    # of the robot's cell centre (49 of them), with unseen 0.5 m within 7 cells (149)
+    near = surroundings(grid, np.array([2.05, 2.05]), 0.2)
+    wide = surroundings(grid, np.array([2.05, 2.05]), 0.5)
+    # the cells whose centres lie within 0.2 m + 2 cells = 4 cells of the robot's cell centre (49),
+    # within 0.5 m + 2 cells = 7 cells (149)
     assert near.sum() == 49 and wide.sum() == 149 and (wide | near).sum() == wide.sum()

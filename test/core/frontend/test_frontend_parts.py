@@ -50,25 +50,17 @@ def _corners_found(kps, squares) -> list[int]:
     return found
 
 
-def test_a_dim_half_of_the_image_keeps_its_corners_with_the_cell_floor():
+def test_one_threshold_for_the_image_keeps_the_strongest_squares_corners_only():
     """A white square on black in the left half, a square 40 grey levels above its background in
     the right half. Harris grows with contrast^4 ((40/255)^4 = 6e-4 of the strongest): one threshold
-    for the image (1 % of its strongest) keeps only the white square's corners; thresholds per cell
-    of a 2 x 1 grid, floored at 1e-4 of the image's strongest, keep both squares'; a floor above
-    6e-4 drops the dim one again."""
+    for the image (1 % of its strongest) keeps only the white square's corners."""
     img = np.zeros((60, 120), np.uint8)
     img[:, 60:] = 100
     img[20:40, 20:40] = 255
     img[20:40, 80:100] = 140
     squares = [(20, 20, 40, 40), (80, 20, 100, 40)]
-    grid = dict(grid_cols=2, grid_rows=1)
-    image_wide = harris(img, FrontendConfig(**grid), margin=5)
+    image_wide = harris(img, FrontendConfig(grid_cols=2, grid_rows=1), margin=5)
     assert _corners_found(image_wide, squares) == [4, 0] and len(image_wide) == 4
-    per_cell = harris(img, FrontendConfig(harris_cell_floor=1e-4, **grid), margin=5)
-    assert _corners_found(per_cell, squares) == [4, 4] and len(per_cell) == 8
-    assert _corners_found(harris(img, FrontendConfig(harris_cell_floor=1e-3, **grid), margin=5), squares) == [4, 0]
-    with pytest.raises(ValueError, match="harris_cell_floor"):
-        FrontendConfig(harris_cell_floor=0.02)
 
 
 def _track(tr: Tracker, xy: np.ndarray, desc: np.ndarray, window=None) -> tuple[np.ndarray, np.ndarray]:
