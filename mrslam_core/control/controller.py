@@ -42,8 +42,8 @@ class Controller:
         return commands
 
     def counters(self) -> dict[str, int]:
-        """How often each event happened so far: ``boxed_in`` (see :class:`Recovery`), ``long_turns``, ``turn_backoffs``, ``blocked_turns`` (see
-        :class:`Follower`)."""
+        """How often each event happened so far: ``boxed_in`` (see :class:`Recovery`),
+        ``long_turns``, ``turn_backoffs``, ``blocked_turns`` (see :class:`Follower`)."""
         f, r = self.follower, self.recovery
         return {"boxed_in": r.boxed_in, "long_turns": f.long_turns,
                 "turn_backoffs": f.turn_backoffs, "blocked_turns": f.blocked_turns}
