@@ -82,17 +82,16 @@ def table(rows: np.ndarray) -> list[dict]:
         seen = band[band[:, 1] > 0]
         if not len(band):
             continue
+        def stat(f, col: int) -> float:
+            return float(f(seen[:, col])) if len(seen) else np.nan
+
         out.append({
             "from_m": lo, "to_m": hi, "placed": len(band), "sighted": len(seen),
-            "range_mean_m": float(np.mean(seen[:, 2])) if len(seen) else np.nan,
-            "range_std_m": float(np.std(seen[:, 2])) if len(seen) else np.nan,
-            "range_sigma_m": float(np.mean(seen[:, 4])) if len(seen) else np.nan,
-            "bearing_std_deg": float(np.degrees(np.std(seen[:, 3]))) if len(seen) else np.nan,
-            "bearing_sigma_deg": float(np.degrees(np.mean(seen[:, 5]))) if len(seen) else np.nan,
-            "nis_mean": float(np.mean(seen[:, 6])) if len(seen) else np.nan,
-            "nis_over_gate": int(np.sum(seen[:, 6] > NIS_GATE)),
-            "nis_range": float(np.mean(seen[:, 7])) if len(seen) else np.nan,
-            "nis_bearing": float(np.mean(seen[:, 8])) if len(seen) else np.nan,
+            "range_mean_m": stat(np.mean, 2), "range_std_m": stat(np.std, 2), "range_sigma_m": stat(np.mean, 4),
+            "bearing_std_deg": float(np.degrees(stat(np.std, 3))),
+            "bearing_sigma_deg": float(np.degrees(stat(np.mean, 5))),
+            "nis_mean": stat(np.mean, 6), "nis_over_gate": int(np.sum(seen[:, 6] > NIS_GATE)),
+            "nis_range": stat(np.mean, 7), "nis_bearing": stat(np.mean, 8),
         })
     return out
 

@@ -104,16 +104,12 @@ class FiducialDetector:
         in_left = self._find(left)
         quads = [q for qs in in_left.values() for q in qs]
         robots = self.cfg.robots
+        self.drops["tag_unknown"] += sum(len(lq) for tag, lq in in_left.items() if tag >= len(robots))
+        others = {tag: lq for tag, lq in in_left.items() if tag < len(robots) and robots[tag] != self.robot}
         # the right image only pairs the left's tags of other robots: not searched without one
-        wanted = any(tag < len(robots) and robots[tag] != self.robot for tag in in_left)
-        in_right = self._find(right) if wanted else {}
+        in_right = self._find(right) if others else {}
         points: dict[int, list[tuple[np.ndarray, np.ndarray]]] = {}
-        for tag, lq in in_left.items():
-            if tag >= len(self.cfg.robots):
-                self.drops["tag_unknown"] += len(lq)
-                continue
-            if self.cfg.robots[tag] == self.robot:
-                continue
+        for tag, lq in others.items():
             for ql, qr in self._pair(lq, in_right.get(tag, [])):
                 axis = self._axis(ql, qr)
                 if axis is not None:
