@@ -148,15 +148,13 @@ def observations_to_cloud(obs: ObservationSet, frame_id: str) -> PointCloud2:
     return msg
 
 
-def cloud_to_observations(msg: PointCloud2, robot: str) -> ObservationSet:
-    """PointCloud2 written by :func:`observations_to_cloud` (or any cloud with those fields, in
-    any order) -> ObservationSet. Raises ConversionError on missing fields, wrong types or counts,
-    big-endian data, or a buffer shorter than the header promises."""
+def _cloud_columns(msg: PointCloud2):
+    """The points of a little-endian PointCloud2 as a reader of its fields: ``column(name, dtype,
+    count)`` -> (N, count) of that field (``dtype`` float or int; ``count`` 0: any), and the field
+    names. Raises ConversionError on big-endian data, a point step or row step that does not
+    hold the points, a buffer shorter than the header promises, or a field of another type or
+    count, or outside the point step."""
     by_name = {f.name: f for f in msg.fields}
-    needed = ("x", "y", "z") + _COV
-    missing = [n for n in needed + ("track_id",) if n not in by_name]
-    if missing:
-        raise ConversionError(f"observation cloud lacks fields {missing}")
     if msg.is_bigendian:
         raise ConversionError("big-endian clouds are not supported")
     n = int(msg.width) * int(msg.height)
@@ -188,19 +186,59 @@ def cloud_to_observations(msg: PointCloud2, robot: str) -> ObservationSet:
             raise ConversionError(f"field {name} (offset {f.offset}, count {f.count}) does not fit the point step {step}")
         return buf[:, f.offset:f.offset + size].copy().view(want).reshape(n, f.count)
 
+    return column, set(by_name)
+
+
+def cloud_to_observations(msg: PointCloud2, robot: str) -> ObservationSet:
+    """PointCloud2 written by :func:`observations_to_cloud` (or any cloud with those fields, in
+    any order) -> ObservationSet. Raises ConversionError on missing fields, wrong types or counts,
+    big-endian data, or a buffer shorter than the header promises."""
+    needed = ("x", "y", "z") + _COV
+    column, names = _cloud_columns(msg)
+    missing = [n for n in needed + ("track_id",) if n not in names]
+    if missing:
+        raise ConversionError(f"observation cloud lacks fields {missing}")
     z = np.hstack([column(c, float) for c in ("x", "y", "z")]).astype(float)
+    n = len(z)
     tri = np.hstack([column(c, float) for c in _COV]).astype(float)
     cov = np.zeros((n, 3, 3))
     cov[:, _IU[0], _IU[1]] = tri
     cov[:, _IU[1], _IU[0]] = tri
     tracks = column("track_id", int)[:, 0].astype(np.int64)
-    desc = column("descriptor", float, 0).astype(np.float32) if "descriptor" in by_name else np.zeros((n, 0), np.float32)
+    desc = column("descriptor", float, 0).astype(np.float32) if "descriptor" in names else np.zeros((n, 0), np.float32)
     if not (np.isfinite(z).all() and np.isfinite(tri).all()):
         raise ConversionError("observation cloud has non-finite points or covariances")
     try:
         return ObservationSet(robot, stamp_to_ns(msg.header.stamp), z, cov, desc, tracks)
     except ValueError as exc:
         raise ConversionError(str(exc)) from exc
+
+
+# ----------------------------------------------------------------------------- bumper contacts
+def contacts_to_cloud(points: np.ndarray, stamp_ns: int, frame_id: str) -> PointCloud2:
+    """Bumper contacts (K, 2) (x, y) in base_link [m] -> PointCloud2 with float32 fields x y z
+    (z = 0), as a bumper node reports them for costmaps."""
+    pts = np.zeros((len(points), 3), np.float32)
+    pts[:, :2] = np.asarray(points, float).reshape(-1, 2)
+    fields = [PointField(name=c, offset=4 * i, datatype=PointField.FLOAT32, count=1) for i, c in enumerate("xyz")]
+    msg = PointCloud2(height=1, width=len(pts), fields=fields, is_bigendian=False, point_step=12,
+                      row_step=12 * len(pts), is_dense=True)
+    msg.header.stamp = ns_to_stamp(stamp_ns)
+    msg.header.frame_id = frame_id
+    msg.data = pts.tobytes()
+    return msg
+
+
+def cloud_to_contacts(msg: PointCloud2) -> np.ndarray:
+    """A bumper's PointCloud2 (fields x and y at least, in the robot's base_link) -> (K, 2) [m].
+    Raises ConversionError on missing fields, non-finite points, or a malformed cloud."""
+    column, names = _cloud_columns(msg)
+    if not {"x", "y"} <= names:
+        raise ConversionError(f"contact cloud lacks fields {sorted({'x', 'y'} - names)}")
+    xy = np.hstack([column(c, float) for c in ("x", "y")]).astype(float)
+    if not np.isfinite(xy).all():
+        raise ConversionError("contact cloud has non-finite points")
+    return xy
 
 
 # ----------------------------------------------------------------------------- robot sightings

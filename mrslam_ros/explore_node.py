@@ -1,8 +1,11 @@
 """The central exploration node: one occupancy grid for the team, coordinated frontier goals,
 and each robot's drive command (the controller, path follower and recovery, runs here, per robot).
 
-Subscribes ``/<robot>/scan`` (LaserScan in base_link from the frontend) and ``/<robot>/pose``
-(PoseWithCovarianceStamped in the map frame from the SLAM node). Each scan is inserted at its
+Subscribes ``/<robot>/scan`` (LaserScan in base_link from the frontend), ``/<robot>/pose``
+(PoseWithCovarianceStamped in the map frame from the SLAM node) and ``/<robot>/bumper``
+(PointCloud2 of contact points in base_link, from a robot with a bumper: each an obstacle for
+good at the robot's newest pose, as a stereo camera does not see a wall without texture; pressed
+ahead of the robot, its goal is given up and it backs off). Each scan is inserted at its
 robot's pose of the same stamp (the frontend stamps a scan and its observation set with the image
 pair's stamp, and the SLAM node stamps the pose of that set with it): the latest pose is a frame
 or two older than a new scan, and a robot turning at 0.5 rad/s would lay its scans 3-6° off,
@@ -24,7 +27,7 @@ import numpy as np
 from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped, Twist
 from nav_msgs.msg import OccupancyGrid, Path
 from rclpy.node import Node
-from sensor_msgs.msg import LaserScan
+from sensor_msgs.msg import LaserScan, PointCloud2
 from visualization_msgs.msg import MarkerArray
 
 from mrslam_core.control.config import ControlConfig
@@ -33,6 +36,8 @@ from mrslam_core.exploration.config import ExplorationConfig, GridConfig
 from mrslam_core.exploration.explorer import Explorer
 from mrslam_core.exploration.grid import OccupancyGrid as Grid
 from mrslam_ros.conversions import (
+    ConversionError,
+    cloud_to_contacts,
     laser_to_scan,
     msg_to_pose,
     occupancy_msg,
@@ -98,6 +103,7 @@ class ExploreNode(Node):
         #: per robot: its poses (stream 0) and scans (stream 1) paired by exact stamp
         self.scan_sync = {r: ApproximateTimeSync(2, 0, self.cfg.scan_queue) for r in self.cfg.robots}
         self.scans_received = self.scans_inserted = 0
+        self.bumped_cells = 0  # grid cells the bumpers marked
         self.cmd_pub = {r: self.create_publisher(Twist, f"/{r}/cmd_vel", 10) for r in self.cfg.robots}
         self.goal_pub = {r: self.create_publisher(PoseStamped, f"/{r}/goal", 10) for r in self.cfg.robots}
         self.plan_pub = {r: self.create_publisher(Path, f"/{r}/plan", 10) for r in self.cfg.robots}
@@ -107,6 +113,7 @@ class ExploreNode(Node):
         for r in self.cfg.robots:
             self.create_subscription(PoseWithCovarianceStamped, f"/{r}/pose", lambda m, r=r: self.on_pose(r, m), 10)
             self.create_subscription(LaserScan, f"/{r}/scan", lambda m, r=r: self.on_scan(r, m), 10)
+            self.create_subscription(PointCloud2, f"/{r}/bumper", lambda m, r=r: self.on_bumper(r, m), 10)
         self.create_timer(self.cfg.control_period, self.control)
         self.create_timer(self.cfg.map_period, self.publish_map)
         self.now_ns = 0
@@ -129,6 +136,24 @@ class ExploreNode(Node):
     def on_scan(self, robot: str, msg: LaserScan) -> None:
         self.scans_received += 1
         self._pair(robot, 1, stamp_to_ns(msg.header.stamp), msg)
+
+    def on_bumper(self, robot: str, msg: PointCloud2) -> None:
+        """What the robot's bumper touches (base_link points) is an obstacle in the grid, placed
+        with its newest pose (``OccupancyGrid.touch``); pressed ahead of it, its goal fails
+        (``Explorer.bumped``)."""
+        if robot not in self.poses:
+            self.diag.count("bumper_without_pose", f"{robot}: a bumper contact before its first pose")
+            return
+        try:
+            points = cloud_to_contacts(msg)
+        except ConversionError as exc:
+            self.diag.count("bad_bumper", f"{robot}: {exc}")
+            return
+        others = [p[:2] for r, p in self.poses.items() if r != robot]
+        self.bumped_cells += self.grid.touch(self.poses[robot], points, others)
+        if self.explorer.bumped(robot, points, self.poses[robot], self.now_ns * 1e-9):
+            self.get_logger().warning(f"{robot}'s bumper is pressed ahead of it: goal given up, backing off; "
+                                      f"{self.explorer.bumped_goals} such goals so far")
 
     def _pair(self, robot: str, stream: int, stamp_ns: int, item) -> None:
         """Offer a pose (stream 0) or a scan (stream 1); a pose and a scan of one stamp go into the grid."""

@@ -1,6 +1,7 @@
 """The simulated team as a ROS node: /clock, and per robot stereo images with camera_info, wheel
-odometry, ground truth, odom -> base_link on /tf and each camera's optical frame on /tf_static; drives
-from ``/<robot>/cmd_vel``.
+odometry, ground truth, its bumper's contacts (``/<robot>/bumper``, PointCloud2 in base_link, sent
+while it touches something), odom -> base_link on /tf and each camera's optical frame on
+/tf_static; drives from ``/<robot>/cmd_vel``.
 
 The simulation advances ``steps_per_tick`` physics steps per timer tick; with ``real_time_factor``
 > 0 the tick period follows the wall clock, with 0 it runs as fast as it can. Nodes that should
@@ -17,7 +18,7 @@ from geometry_msgs.msg import Twist
 from nav_msgs.msg import Odometry
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
-from sensor_msgs.msg import CameraInfo, Image
+from sensor_msgs.msg import CameraInfo, Image, PointCloud2
 from tf2_msgs.msg import TFMessage
 
 from mrslam_core.frontend.config import FiducialConfig
@@ -26,6 +27,7 @@ from mrslam_core.sim.simulation import Simulation
 from mrslam_ros.conversions import (
     array_to_image,
     calibration_to_camera_info,
+    contacts_to_cloud,
     matrix_transform_msg,
     ns_to_stamp,
     pose_to_msg,
@@ -89,6 +91,7 @@ class SimNode(Node):
                 "right_info": self.create_publisher(CameraInfo, f"/{n}/stereo/right/camera_info", 5),
                 "odom": self.create_publisher(Odometry, f"/{n}/odom", ODOMETRY_HISTORY),
                 "truth": self.create_publisher(Odometry, f"/{n}/ground_truth", 50),
+                "bumper": self.create_publisher(PointCloud2, f"/{n}/bumper", 10),
             }
             self.create_subscription(Twist, f"/{n}/cmd_vel", lambda m, n=n: self.on_cmd(n, m), 10)
         dt = self.cfg.steps_per_tick / self.cfg.sim.physics_hz
@@ -139,6 +142,9 @@ class SimNode(Node):
             truth.pose.pose = pose_to_msg(self.sim.ground_truth(n))
             self.pubs[n]["truth"].publish(truth)
             transforms.append(transform_msg(pose, now, f"{n}/odom", f"{n}/base_link"))
+            touch = self.sim.contacts(n)
+            if len(touch):
+                self.pubs[n]["bumper"].publish(contacts_to_cloud(touch, now, f"{n}/base_link"))
         self.tf_pub.publish(TFMessage(transforms=transforms))
         for n in self.sim.frames_due():
             frame = self.sim.render_stereo(n)

@@ -181,7 +181,7 @@ def run_one(world: str, seed: int, robots: int, seconds: float | None, folder: P
         "still_max_s": max(m["still_s"] for m in robots_out.values()),
         "update_ms": latency_summary(ms) | {f"p{q}": float(np.percentile(ms, q)) if ms.size else float("nan")
                                             for q in (5, 25, 75, 99)},
-        "counters": {k: res[k] for k in ("boxed_in", "long_turns", "turn_backoffs", "blocked_turns")},
+        "counters": {k: res[k] for k in ("boxed_in", "long_turns", "turn_backoffs", "blocked_turns", "bumped_cells", "bumped_goals")},
     }
 
 

@@ -91,6 +91,8 @@ class Explorer:
     plans: int = 0
     checkpoints: dict[str, tuple[np.ndarray, float]] = field(default_factory=dict)
     known_at_plan: int = 0
+    #: goals failed because the robot's bumper was pressed ahead of it (:meth:`bumped`)
+    bumped_goals: int = 0
     #: per robot, the time of its first pose [s] (``start_delay``)
     first_seen: dict[str, float] = field(default_factory=dict)
     #: the candidate targets of the last plan, one per frontier stretch (T, 2) [m] map frame
@@ -161,10 +163,11 @@ class Explorer:
         start = tuple(np.clip(grid.cell_of(poses[name][:2]), 0, np.array(grid.shape) - 1))
         goal = tuple(np.clip(grid.cell_of(target), 0, np.array(grid.shape) - 1))
         # a robot standing closer than its radius (or its camera's near limit) to an obstacle may
-        # leave through inflated cells around it (never through occupied ones)
+        # leave through inflated cells around it, never through occupied ones nor the cells next
+        # to them (its centre there would put its side, half a body width out, in the obstacle)
         cfg = self.config
         near = surroundings(grid, poses[name][:2], max(cfg.robot_radius, self._unseen))
-        leave = near & ~grid.occupied()
+        leave = near & ~inflate(grid.occupied(), 1.5)
         path = astar(passable | leave, start, goal)
         if path is None:
             self.goals[name] = None
@@ -180,6 +183,23 @@ class Explorer:
     def _unseen(self) -> float:
         """Radius [m] round a robot that its camera never sees: the platform's ``camera_near``."""
         return self.controller.config.platform.camera_near
+
+    def bumped(self, name: str, points: np.ndarray, pose: np.ndarray, now: float) -> bool:
+        """``name``'s bumper is pressed at ``points`` (K, 2) (x, y) in its base_link [m], at
+        ``pose`` (x, y, θ) map frame, at ``now`` [s]. Pressed ahead of its axle (x > 0) while it
+        drives to a goal, it pushes into what it touched: the goal fails at once, as after
+        ``progress_timeout`` without headway (struck, and the robot backs off), instead of after
+        pushing for that long. Returns whether the goal failed (counted as ``bumped_goals``)."""
+        points = np.asarray(points, float).reshape(-1, 2)
+        goal = self.goals.get(name)
+        if goal is None or not (points[:, 0] > 0).any() or self.controller.recovery.active(name, now):
+            return False
+        self._strike(goal.target, now)
+        self.goals[name] = None
+        self.checkpoints[name] = (np.asarray(pose, float)[:2].copy(), now)
+        self.controller.recovery.start(name, pose, now)
+        self.bumped_goals += 1
+        return True
 
     def _strike(self, target: np.ndarray, now: float) -> None:
         """A goal failed (no path, or no headway): block it for a while; after ``max_strikes``

@@ -57,7 +57,8 @@ class OccupancyGrid:
     The grid holds a dense window of that lattice, the arrays
 
     - ``logodds`` (H, W) float32: probability = 1 / (1 + exp(−log-odds)); 0 (p = 0.5) = unknown;
-    - ``observed`` (H, W) bool: cells a beam reached at least once,
+    - ``observed`` (H, W) bool: cells a beam reached at least once (or a bumper touched);
+    - ``contact`` (H, W) bool: cells a robot's bumper touched (:meth:`touch`), occupied for good,
 
     whose cell (i, j) (row = y, column = x) is world cell (i + ``offset[0]``, j + ``offset[1]``):
     it covers x ∈ [ox + j·res, ox + (j+1)·res), y ∈ [oy + i·res, oy + (i+1)·res) with
@@ -102,6 +103,8 @@ class OccupancyGrid:
             self.offset = lo
         self.logodds = np.zeros(shape, np.float32)
         self.observed = np.zeros(shape, bool)
+        #: (H, W) bool: cells a robot's bumper touched (:meth:`touch`): occupied for good
+        self.contact = np.zeros(shape, bool)
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -148,10 +151,11 @@ class OccupancyGrid:
             return
         shape = tuple(int(n) for n in new_stop - new_start)
         (r0, c0), (h, w) = start - new_start, self.shape
-        logodds, observed = np.zeros(shape, np.float32), np.zeros(shape, bool)
+        logodds, observed, contact = np.zeros(shape, np.float32), np.zeros(shape, bool), np.zeros(shape, bool)
         logodds[r0:r0 + h, c0:c0 + w] = self.logodds
         observed[r0:r0 + h, c0:c0 + w] = self.observed
-        self.logodds, self.observed, self.offset = logodds, observed, new_start
+        contact[r0:r0 + h, c0:c0 + w] = self.contact
+        self.logodds, self.observed, self.contact, self.offset = logodds, observed, contact, new_start
 
     def probability(self) -> np.ndarray:
         """(H, W) occupancy probability; unobserved cells are exactly 0.5."""
@@ -209,8 +213,9 @@ class OccupancyGrid:
         free_keys = np.unique((free[:, 0] - self.offset[0]) * width + free[:, 1] - self.offset[1])
         hit_keys, beam_of = np.unique((hits[:, 0] - self.offset[0]) * width + hits[:, 1] - self.offset[1],
                                       return_inverse=True)
-        # a cell holding an obstacle end is not cleared by other beams
+        # a cell holding an obstacle end is not cleared by other beams, nor one a bumper touched
         cleared = np.setdiff1d(free_keys, hit_keys, assume_unique=True)
+        cleared = cleared[~self.contact.ravel()[cleared]]
         c = self.cfg
         add = np.full(len(hit_keys), -np.inf)  # several beams ending in one cell: the surest counts
         np.maximum.at(add, beam_of.ravel(), self.hit_logodds(scan.ranges[scan.hit]))
@@ -219,6 +224,36 @@ class OccupancyGrid:
             self.logodds[rc] = np.clip(self.logodds[rc] + step, -c.clamp, c.clamp)
         self.observed[np.divmod(free_keys, width)] = True
         self.observed[np.divmod(hit_keys, width)] = True
+
+    def touch(self, pose: np.ndarray, points: np.ndarray, teammates: np.ndarray | None = None) -> int:
+        """Mark where a robot at ``pose`` (x, y, θ) map frame touched something: ``points`` (K, 2)
+        (x, y) in its base_link [m] (its bumper, ``Simulation.contacts``). A touch is certain
+        where a stereo scan is not: a wall without texture gives the camera no disparity, and one
+        nearer than its near limit none at all, so a robot can press against an obstacle its
+        scans never showed. The cells become occupied (log-odds ``clamp``) and beams never clear
+        them. Points within ``teammate_radius`` of ``teammates`` (K, 2) [m] touched another robot
+        and mark nothing. Returns the number of cells newly marked."""
+        pose = np.asarray(pose, float)
+        points = np.asarray(points, float).reshape(-1, 2)
+        if not len(points) or not np.isfinite(pose).all():
+            return 0
+        c, s = np.cos(pose[2]), np.sin(pose[2])
+        xy = pose[:2] + points @ np.array([[c, s], [-s, c]])
+        xy = xy[np.isfinite(xy).all(axis=1)]
+        if teammates is not None and len(xy) and self.cfg.teammate_radius > 0:
+            mates = np.asarray(teammates, float).reshape(-1, 2)
+            if len(mates):
+                xy = xy[np.linalg.norm(xy[:, None] - mates[None], axis=2).min(axis=1) >= self.cfg.teammate_radius]
+        if not len(xy):
+            return 0
+        cells = np.unique(self._world_cells(xy), axis=0)
+        self._cover_cells(cells.min(axis=0), cells.max(axis=0))
+        rc = tuple((cells - self.offset).T)
+        new = int(np.count_nonzero(~self.contact[rc]))
+        self.contact[rc] = True
+        self.observed[rc] = True
+        self.logodds[rc] = self.cfg.clamp
+        return new
 
 
 @dataclass

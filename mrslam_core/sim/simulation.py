@@ -103,7 +103,8 @@ class Simulation:
         cid = self.client
         p.setGravity(0, 0, 0, physicsClientId=cid)
         p.setTimeStep(self._dt, physicsClientId=cid)
-        build_scene(cid, self.world, self.config.seed, self.config.texture_density, Path(self._tmp.name))
+        self._floor = build_scene(cid, self.world, self.config.seed, self.config.texture_density,
+                                  Path(self._tmp.name))[0]
         self._urdf = Path(self._tmp.name) / "pioneer3dx.urdf"
         self._urdf.write_text(self.robot_description())
         cam = self.config.camera
@@ -225,6 +226,21 @@ class Simulation:
         twist (v, ω) over the last physics step [m/s, rad/s], both (noisy) copies."""
         i = self._index(name)
         return self._odom[i].copy(), self._odom_twist[i].copy()
+
+    def contacts(self, name: str) -> np.ndarray:
+        """The robot's bumper: (K, 2) points (x, y) in base_link [m] where its body touches
+        something other than the floor (a wall, furniture, another robot) now; at most one per
+        centimetre. A contact sensor round the body (a bumper skirt), as a robot's bumper node
+        reports it."""
+        body = self._bodies[self._index(name)]
+        pts = [c[5][:2] for c in p.getContactPoints(bodyA=body, physicsClientId=self.client) if c[2] != self._floor]
+        if not pts:
+            return np.zeros((0, 2))
+        pose = self._truth[self._index(name)]
+        c, s = np.cos(pose[2]), np.sin(pose[2])
+        d = np.asarray(pts, float) - pose[:2]
+        local = np.column_stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]])
+        return np.unique(np.round(local, 2), axis=0)
 
     # ------------------------------------------------------------------ time
     @property

@@ -10,7 +10,9 @@ from mrslam_ros.conversions import (
     array_to_image,
     calibration_to_camera_info,
     camera_info_to_calibration,
+    cloud_to_contacts,
     cloud_to_observations,
+    contacts_to_cloud,
     image_to_array,
     msg_to_pose,
     msg_to_sighting,
@@ -332,3 +334,24 @@ def test_sighting_round_trip_and_bad_sightings():
     msg.pose.covariance = [0.0] * 36
     with pytest.raises(ConversionError, match="not usable"):
         msg_to_sighting(msg, "robot1")
+
+
+def test_bumper_contacts_round_trip_and_bad_clouds():
+    pts = np.array([[0.185, 0.19], [0.185, -0.05], [-0.265, 0.0]])
+    msg = contacts_to_cloud(pts, 3_000_000_007, "robot1/base_link")
+    assert msg.header.frame_id == "robot1/base_link" and stamp_to_ns(msg.header.stamp) == 3_000_000_007
+    np.testing.assert_allclose(cloud_to_contacts(msg), pts, atol=1e-7)  # float32
+    assert cloud_to_contacts(contacts_to_cloud(np.zeros((0, 2)), 1, "f")).shape == (0, 2)
+    # an observation cloud has x and y too: read as contacts
+    np.testing.assert_allclose(cloud_to_contacts(observations_to_cloud(_obs(), "f")), _obs().z[:, :2], atol=1e-7)
+    nan = contacts_to_cloud(np.array([[np.nan, 0.0]]), 1, "f")
+    with pytest.raises(ConversionError, match="non-finite"):
+        cloud_to_contacts(nan)
+    no_y = contacts_to_cloud(pts, 1, "f")
+    no_y.fields = [f for f in no_y.fields if f.name != "y"]
+    with pytest.raises(ConversionError, match="lacks fields"):
+        cloud_to_contacts(no_y)
+    short = contacts_to_cloud(pts, 1, "f")
+    short.data = bytes(short.data)[:20]
+    with pytest.raises(ConversionError, match="bytes"):
+        cloud_to_contacts(short)

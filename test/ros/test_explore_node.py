@@ -97,6 +97,35 @@ def test_a_scan_is_laid_at_the_pose_of_its_own_stamp_not_the_latest():
         rclpy.shutdown()
 
 
+def test_a_bumper_contact_is_an_obstacle_at_the_robots_pose_and_bad_clouds_are_counted():
+    """robot1 at (5, 5) facing north touches at (0.18, 0.19) in base_link: the map point (4.81,
+    5.18). A contact before any pose, one on robot2 (standing 0.7 m west; the touch 0.3 m off
+    robot1's left side is 0.4 m from it) and a cloud without y are counted or dropped, not laid."""
+    import rclpy
+
+    from mrslam_ros.conversions import contacts_to_cloud, pose_with_covariance
+    from mrslam_ros.explore_node import ExploreNode
+
+    rclpy.init()
+    try:
+        node = ExploreNode(parameter_overrides=[rclpy.parameter.Parameter("robots", value=["robot1", "robot2"])])
+        touch = contacts_to_cloud(np.array([[0.18, 0.19]]), 1, "robot1/base_link")
+        node.on_bumper("robot1", touch)
+        assert node.drops["bumper_without_pose"] == 1 and not node.grid.observed.size
+        north = np.array([5.0, 5.0, np.pi / 2])
+        node.on_pose("robot1", pose_with_covariance(north, np.eye(3) * 1e-4, 1, "map"))
+        node.on_pose("robot2", pose_with_covariance(np.array([4.3, 5.0, 0.0]), np.eye(3) * 1e-4, 1, "map"))
+        node.on_bumper("robot1", touch)
+        np.testing.assert_allclose(node.grid.centre_of(np.argwhere(node.grid.occupied())), [[4.85, 5.15]], atol=1e-9)
+        node.on_bumper("robot1", contacts_to_cloud(np.array([[0.0, 0.3]]), 2, "robot1/base_link"))  # on robot2
+        bad = contacts_to_cloud(np.array([[0.1, 0.0]]), 3, "robot1/base_link")
+        bad.fields = bad.fields[:1]
+        node.on_bumper("robot1", bad)
+        assert node.bumped_cells == 1 and node.drops["bad_bumper"] == 1
+    finally:
+        rclpy.shutdown()
+
+
 def test_the_node_logs_counters_of_either_severity_as_they_grow():
     """rclpy raises when one call site logs at two severities; a blocked turn (a warning) after a
     long turn (information) once took the node down mid-run."""

@@ -336,3 +336,45 @@ def test_the_explorer_inflates_by_at_least_the_platform_and_leaves_its_unseen_gr
     # the cells whose centres lie within 0.2 m + 2 cells = 4 cells of the robot's cell centre (49),
     # within 0.5 m + 2 cells = 7 cells (149)
     assert near.sum() == 49 and wide.sum() == 149 and (wide | near).sum() == wide.sum()
+
+
+def test_a_robot_leaves_a_touched_corner_with_its_side_clear_of_it():
+    """The simulated Pioneer at (1.05, 2.05) facing east touched a corner at its front right:
+    the cell (1.25, 1.85) is occupied, everything else observed free; its goal lies 2.5 m east.
+    Within the ground it may leave through (``surroundings``), the path keeps off the occupied
+    cell and its 8 neighbours, every cell centre at least 2 cells (0.2 m, more than half the
+    body's width) from it; beyond, the inflation by robot_radius holds."""
+    from mrslam_core.exploration.explorer import Explorer, planning_layers
+
+    grid = _open_room()
+    corner = tuple(grid.cell_of(np.array([1.25, 1.85])))
+    grid.logodds[corner] = 4.0
+    cfg = ExplorationConfig(min_target_distance=0.5)
+    ex = Explorer(cfg, ["r"], Controller(ControlConfig()))
+    pose = np.array([1.05, 2.05, 0.0])
+    passable, _ = planning_layers(grid, cfg)
+    ex._set_goal("r", np.array([3.55, 2.05]), grid, passable, {"r": pose}, 0.0, np.array([[3.55, 2.05]]))
+    path = ex.goals["r"].path
+    clearance = np.linalg.norm(path - grid.centre_of(np.array(corner)), axis=1)
+    assert clearance[1:].min() == pytest.approx(0.2) and clearance[1:].min() > PlatformConfig().width / 2
+    assert (clearance[1:] < cfg.robot_radius).any()  # it does leave through inflated ground
+
+
+def test_a_bumper_pressed_ahead_fails_the_goal_at_once_and_the_robot_backs_off():
+    """A robot driving to a frontier whose bumper is pressed ahead of its axle (front right
+    corner) gives the goal up at once (struck) and backs off; pressed behind the axle, or with no
+    goal, nothing happens."""
+    from mrslam_core.exploration.explorer import Explorer
+
+    cfg = ExplorationConfig(robot_radius=0.2, min_target_distance=0.5)
+    ctl = ControlConfig(platform=SMALL)
+    ex = Explorer(cfg, ["r"], Controller(ctl))
+    pose = np.array([1.05, 2.05, 0.0])
+    ex.step(_open_room(), {"r": pose}, 0.0)
+    assert ex.goals["r"] is not None
+    assert not ex.bumped("r", np.array([[-0.1, 0.1]]), pose, 0.2)  # the rear: not pushing into it
+    assert ex.bumped("r", np.array([[0.1, -0.1]]), pose, 0.2)
+    assert ex.goals["r"] is None and len(ex.blacklist) == 1 and ex.bumped_goals == 1
+    v, w = ex.step(_open_room(), {"r": pose}, 0.4)["r"]
+    assert (v, w) == (-ctl.recovery_speed, 0.0)
+    assert not ex.bumped("r", np.array([[0.1, -0.1]]), pose, 0.6)  # recovering: no goal to fail

@@ -225,3 +225,20 @@ def test_range_noise_must_be_finite_and_not_negative():
     for bad in (-0.01, float("inf"), float("nan")):
         with pytest.raises(ValueError, match="range_noise"):
             GridConfig(range_noise=bad)
+
+
+def test_a_bumper_touch_is_occupied_for_good_and_beams_do_not_clear_it():
+    """A robot at (1, 2) facing north (+y) touches at (0.18, 0.19) in base_link: the map point
+    (0.81, 2.18), cell centre (0.85, 2.15). Beams through the cell leave it occupied; a touch
+    within ``teammate_radius`` of a teammate marks nothing."""
+    grid = OccupancyGrid(GridConfig())
+    pose = np.array([1.0, 2.0, np.pi / 2])
+    assert grid.touch(pose, np.array([[0.18, 0.19], [0.18, 0.19]]), np.array([[5.0, 5.0]])) == 1
+    np.testing.assert_allclose(grid.centre_of(np.argwhere(grid.occupied())), [[0.85, 2.15]], atol=1e-9)
+    for _ in range(20):
+        grid.insert(np.array([0.0, 2.15, 0.0]), _beam_to(np.array([0.0, 2.15, 0.0]), (3.0, 2.15), hit=False))
+    np.testing.assert_allclose(grid.centre_of(np.argwhere(grid.occupied())), [[0.85, 2.15]], atol=1e-9)
+    assert grid.free()[tuple(grid.cell_of(np.array([0.55, 2.15])))]  # its neighbours on the beam are free
+    # the touch was on a teammate standing 0.3 m away: nothing new
+    assert grid.touch(pose, np.array([[0.0, -0.3]]), np.array([[1.3, 2.0]])) == 0
+    assert grid.occupied().sum() == 1

@@ -69,6 +69,21 @@ def test_robot_stops_at_a_wall_and_at_another_robot():
         assert sim.ground_truth("s")[0] < sim.ground_truth("r")[0] - BODY.rear - BODY_FRONT + 0.03
 
 
+def test_the_bumper_reports_where_the_body_touches_a_wall_in_base_link():
+    """Driven head-on into the east wall (face at x = 5.95), the robot touches it with its front
+    face, BODY.front ahead of base_link and within the body's width; standing free, it touches
+    nothing (the floor is not a contact)."""
+    with Simulation(FAST) as sim:
+        sim.add_robot("r", np.array([4.5, 2.5, 0.0]))
+        assert sim.contacts("r").shape == (0, 2)
+        sim.set_command("r", 0.6, 0.0)
+        sim.run_until(int(6e9))
+        touch = sim.contacts("r")
+        assert len(touch) >= 1
+        np.testing.assert_allclose(touch[:, 0], BODY_FRONT, atol=0.015)
+        assert np.all(np.abs(touch[:, 1]) <= BODY.width / 2 + 0.01)
+
+
 def test_wheels_do_not_slip_sideways_against_a_wall():
     """Driving into the east wall at 50°, then turning on the spot against it: the robot stops
     instead of sliding along the wall, and whatever it does stays along its heading, so noiseless
