@@ -12,7 +12,8 @@ out. Per range band: the median and the robust σ (1.4826 · MAD) of the error [
 The scan itself (each bearing bin's nearest point in the obstacle band) is compared with the scan
 of the rendered depth (``ObstacleScanner.from_depth``, each reduced pixel at the nearest depth it
 covers): per band of the true range, the share of bins whose stereo range is more than 0.2 m
-short of it (a false obstacle in front of the true one) or long.
+short of it (a false obstacle in front of the true one) or long, and the share of the bins with
+an obstacle in the rendered depth where the stereo scan has none (walls without texture).
 """
 
 from __future__ import annotations
@@ -49,6 +50,8 @@ class NoiseFit:
         fb: f·b of the rig [px·m].
         bins_true, bins_scan: (B,) every scan bin with a hit in both: its range in the scan of
             the rendered depth and in the stereo scan [m].
+        bins_missed: (C,) every scan bin with a hit in the scan of the rendered depth and none
+            in the stereo scan (a surface without texture gives no disparity): its true range [m].
     """
 
     ranges: np.ndarray
@@ -56,6 +59,7 @@ class NoiseFit:
     fb: float
     bins_true: np.ndarray
     bins_scan: np.ndarray
+    bins_missed: np.ndarray
 
     @property
     def sigma_d(self) -> float:
@@ -68,15 +72,18 @@ class NoiseFit:
         return self.sigma_d / self.fb
 
     def bin_bands(self, off: float = 0.2) -> list[dict]:
-        """Per band of the true range: scan bins, median range error [m], share of bins more than
-        ``off`` [m] short and long."""
+        """Per band of the true range: scan bins hit in both, median range error [m], share of
+        them more than ``off`` [m] short and long, and the share of the bins with a true obstacle
+        in the band that the stereo scan missed."""
         out = []
         for lo, hi in zip(BANDS[:-1], BANDS[1:]):
             s = (self.bins_true >= lo) & (self.bins_true < hi)
             e = self.bins_scan[s] - self.bins_true[s]
+            missed = int(np.count_nonzero((self.bins_missed >= lo) & (self.bins_missed < hi)))
             if len(e):
                 out.append({"from_m": lo, "to_m": hi, "bins": int(len(e)), "median_m": float(np.median(e)),
-                            "short": float(np.mean(e < -off)), "long": float(np.mean(e > off))})
+                            "short": float(np.mean(e < -off)), "long": float(np.mean(e > off)),
+                            "missed": missed / (missed + len(e))})
         return out
 
     def bands(self) -> list[dict]:
@@ -95,7 +102,7 @@ def measure(worlds: tuple[str, ...] = WORLDS, views: int = 8, frontend: Frontend
     """The disparity error over ``views`` headings at every start pose of each of ``worlds``."""
     team = TeamConfig()
     frontend = frontend or team.frontend
-    ranges, errors, bins_true, bins_scan = [], [], [], []
+    ranges, errors, bins_true, bins_scan, bins_missed = [], [], [], [], []
     fb = 0.0
     for world in worlds:
         cfg = replace(team.sim, world=world, seed=seed)
@@ -129,8 +136,9 @@ def measure(worlds: tuple[str, ...] = WORLDS, views: int = 8, frontend: Frontend
                     both = np.isfinite(truth.ranges) & np.isfinite(scan.ranges)
                     bins_true.append(truth.ranges[both])
                     bins_scan.append(scan.ranges[both])
+                    bins_missed.append(truth.ranges[np.isfinite(truth.ranges) & ~np.isfinite(scan.ranges)])
     return NoiseFit(*(np.concatenate(v) for v in (ranges, errors)), float(fb),
-                    *(np.concatenate(v) for v in (bins_true, bins_scan)))
+                    *(np.concatenate(v) for v in (bins_true, bins_scan, bins_missed)))
 
 
 def main(argv: list[str]) -> int:
@@ -148,10 +156,13 @@ def main(argv: list[str]) -> int:
         lines.append(f"| {b['from_m']:g}-{b['to_m']:g} | {b['pixels']} | {b['median_px']:+.3f} | {b['sigma_px']:.3f} |")
     lines += ["", f"σd {fit.sigma_d:.3f} px; f·b {fit.fb:.2f} px·m; range_noise = σd / (f·b) = {fit.range_noise:.4f} 1/m",
               "", "The scan's bins against the scan of the rendered depth:", "",
-              "| true range [m] | bins | median error [m] | > 0.2 m short | > 0.2 m long |", "|---|---|---|---|---|"]
+              "| true range [m] | bins | median error [m] | > 0.2 m short | > 0.2 m long | no stereo hit |",
+              "|---|---|---|---|---|---|"]
     for b in fit.bin_bands():
         lines.append(f"| {b['from_m']:g}-{b['to_m']:g} | {b['bins']} | {b['median_m']:+.3f} | {100 * b['short']:.0f} % | "
-                     f"{100 * b['long']:.0f} % |")
+                     f"{100 * b['long']:.0f} % | {100 * b['missed']:.0f} % |")
+    missed = len(fit.bins_missed) / max(len(fit.bins_missed) + len(fit.bins_true), 1)
+    lines += ["", f"Bins with an obstacle in the rendered depth that the stereo scan missed: {100 * missed:.0f} %"]
     write_tables(args.out, "obstacle_noise", "\n".join(lines),
                  {"sigma_d_px": fit.sigma_d, "fb": fit.fb, "range_noise": fit.range_noise, "bands": fit.bands(),
                   "bins": fit.bin_bands()})
