@@ -7,7 +7,7 @@ so a node can count and drop a bad message instead of crashing.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 
 import numpy as np
 from builtin_interfaces.msg import Time
@@ -148,7 +148,7 @@ def observations_to_cloud(obs: ObservationSet, frame_id: str) -> PointCloud2:
     return msg
 
 
-def _cloud_columns(msg: PointCloud2):
+def _cloud_columns(msg: PointCloud2) -> tuple[Callable[..., np.ndarray], set[str]]:
     """The points of a little-endian PointCloud2 as a reader of its fields: ``column(name, dtype,
     count)`` -> (N, count) of that field (``dtype`` float or int; ``count`` 0: any), and the field
     names. Raises ConversionError on big-endian data, a point step or row step that does not

@@ -79,6 +79,8 @@ RUN_FACTOR = 2.0
 REFERENCE_SECONDS = 1800.0
 COVERAGE_EVERY = 1.0  # [s]
 _THREAD_VARS = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
+#: the team run's event counters each run's JSON keeps (``pipelines.team.run``)
+COUNTERS = ("boxed_in", "long_turns", "turn_backoffs", "blocked_turns", "bumped_cells", "bumped_goals")
 
 
 def team_config(world: str, seed: int, robots: int) -> TeamConfig:
@@ -181,7 +183,7 @@ def run_one(world: str, seed: int, robots: int, seconds: float | None, folder: P
         "still_max_s": max(m["still_s"] for m in robots_out.values()),
         "update_ms": latency_summary(ms) | {f"p{q}": float(np.percentile(ms, q)) if ms.size else float("nan")
                                             for q in (5, 25, 75, 99)},
-        "counters": {k: res[k] for k in ("boxed_in", "long_turns", "turn_backoffs", "blocked_turns", "bumped_cells", "bumped_goals")},
+        "counters": {k: res[k] for k in COUNTERS},
     }
 
 

@@ -232,11 +232,12 @@ class Simulation:
         something other than the floor (a wall, furniture, another robot) now; at most one per
         centimetre. A contact sensor round the body (a bumper skirt), as a robot's bumper node
         reports it."""
-        body = self._bodies[self._index(name)]
-        pts = [c[5][:2] for c in p.getContactPoints(bodyA=body, physicsClientId=self.client) if c[2] != self._floor]
+        i = self._index(name)
+        pts = [c[5][:2] for c in p.getContactPoints(bodyA=self._bodies[i], physicsClientId=self.client)
+               if c[2] != self._floor]
         if not pts:
             return np.zeros((0, 2))
-        pose = self._truth[self._index(name)]
+        pose = self._truth[i]
         c, s = np.cos(pose[2]), np.sin(pose[2])
         d = np.asarray(pts, float) - pose[:2]
         local = np.column_stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]])
