@@ -103,7 +103,6 @@ class ExploreNode(Node):
         #: per robot: its poses (stream 0) and scans (stream 1) paired by exact stamp
         self.scan_sync = {r: ApproximateTimeSync(2, 0, self.cfg.scan_queue) for r in self.cfg.robots}
         self.scans_received = self.scans_inserted = 0
-        self.bumped_cells = 0  # grid cells the bumpers marked
         self.cmd_pub = {r: self.create_publisher(Twist, f"/{r}/cmd_vel", 10) for r in self.cfg.robots}
         self.goal_pub = {r: self.create_publisher(PoseStamped, f"/{r}/goal", 10) for r in self.cfg.robots}
         self.plan_pub = {r: self.create_publisher(Path, f"/{r}/plan", 10) for r in self.cfg.robots}
@@ -139,8 +138,7 @@ class ExploreNode(Node):
 
     def on_bumper(self, robot: str, msg: PointCloud2) -> None:
         """What the robot's bumper touches (base_link points) is an obstacle in the grid, placed
-        with its newest pose (``OccupancyGrid.touch``); pressed ahead of it, its goal fails
-        (``Explorer.bumped``)."""
+        with its newest pose; pressed ahead of it, its goal fails (``Explorer.bumped``)."""
         if robot not in self.poses:
             self.diag.count("bumper_without_pose", f"{robot}: a bumper contact before its first pose")
             return
@@ -149,9 +147,7 @@ class ExploreNode(Node):
         except ConversionError as exc:
             self.diag.count("bad_bumper", f"{robot}: {exc}")
             return
-        others = [p[:2] for r, p in self.poses.items() if r != robot]
-        self.bumped_cells += self.grid.touch(self.poses[robot], points, others)
-        if self.explorer.bumped(robot, points, self.poses[robot], self.now_ns * 1e-9):
+        if self.explorer.bumped(self.grid, robot, points, self.poses, self.now_ns * 1e-9):
             self.get_logger().warning(f"{robot}'s bumper is pressed ahead of it: goal given up, backing off; "
                                       f"{self.explorer.bumped_goals} such goals so far")
 

@@ -91,7 +91,9 @@ class Explorer:
     plans: int = 0
     checkpoints: dict[str, tuple[np.ndarray, float]] = field(default_factory=dict)
     known_at_plan: int = 0
-    #: goals failed because the robot's bumper was pressed ahead of it (:meth:`bumped`)
+    #: grid cells the bumpers marked, and goals failed because a robot's bumper was pressed
+    #: ahead of it (:meth:`bumped`)
+    bumped_cells: int = 0
     bumped_goals: int = 0
     #: per robot, the time of its first pose [s] (``start_delay``)
     first_seen: dict[str, float] = field(default_factory=dict)
@@ -184,22 +186,33 @@ class Explorer:
         """Radius [m] round a robot that its camera never sees: the platform's ``camera_near``."""
         return self.controller.config.platform.camera_near
 
-    def bumped(self, name: str, points: np.ndarray, pose: np.ndarray, now: float) -> bool:
-        """``name``'s bumper is pressed at ``points`` (K, 2) (x, y) in its base_link [m], at
-        ``pose`` (x, y, θ) map frame, at ``now`` [s]. Pressed ahead of its axle (x > 0) while it
-        drives to a goal, it pushes into what it touched: the goal fails at once, as after
-        ``progress_timeout`` without headway (struck, and the robot backs off), instead of after
-        pushing for that long. Returns whether the goal failed (counted as ``bumped_goals``)."""
+    def bumped(self, grid: OccupancyGrid, name: str, points: np.ndarray, poses: dict[str, np.ndarray],
+               now: float) -> bool:
+        """``name``'s bumper is pressed at ``points`` (K, 2) (x, y) in its base_link [m] at ``now``
+        [s], every robot at its pose of ``poses`` (x, y, θ) map frame. What it touched is an
+        occupied cell of ``grid`` for good (``OccupancyGrid.touch``; a touch on a teammate marks
+        nothing), counted in ``bumped_cells``. Pressed ahead of its axle (x > 0) while it drives
+        to a goal, it pushes into what it touched: the goal fails at once, as after
+        ``progress_timeout`` without headway, instead of after pushing for that long. Returns
+        whether the goal failed (counted as ``bumped_goals``)."""
         points = np.asarray(points, float).reshape(-1, 2)
+        pose = np.asarray(poses[name], float)
+        teammates = [np.asarray(p)[:2] for r, p in poses.items() if r != name]
+        self.bumped_cells += grid.touch(pose, points, teammates)
         goal = self.goals.get(name)
         if goal is None or not (points[:, 0] > 0).any() or self.controller.recovery.active(name, now):
             return False
-        self._strike(goal.target, now)
-        self.goals[name] = None
-        self.checkpoints[name] = (np.asarray(pose, float)[:2].copy(), now)
-        self.controller.recovery.start(name, pose, now)
+        self._give_up(name, goal, pose, now)
         self.bumped_goals += 1
         return True
+
+    def _give_up(self, name: str, goal: Goal, pose: np.ndarray, now: float) -> None:
+        """``name`` made no headway to ``goal`` from ``pose`` (x, y, θ) [m, rad]: never chase it
+        again (struck), and back off before the next goal."""
+        self._strike(goal.target, now)
+        self.goals[name] = None
+        self.checkpoints[name] = (pose[:2].copy(), now)
+        self.controller.recovery.start(name, pose, now)
 
     def _strike(self, target: np.ndarray, now: float) -> None:
         """A goal failed (no path, or no headway): block it for a while; after ``max_strikes``
@@ -238,11 +251,7 @@ class Explorer:
             elif np.linalg.norm(poses[name][:2] - where) > 0.3:
                 self.checkpoints[name] = (poses[name][:2].copy(), now)
             elif now - since > cfg.progress_timeout:
-                # no headway for a while (blocked, or oscillating): never chase this goal again
-                self._strike(g.target, now)
-                self.goals[name] = None
-                self.checkpoints[name] = (poses[name][:2].copy(), now)
-                self.controller.recovery.start(name, poses[name], now)  # back off before the next goal
+                self._give_up(name, g, np.asarray(poses[name], float), now)  # blocked, or oscillating
                 due = True
         if due and self.state is not State.COMPLETE:
             grid_ok = grid.observed.any()

@@ -109,7 +109,6 @@ def run(cfg: TeamConfig, progress: bool = False, coverage_every: float = 0.0) ->
     for n in names:
         feed.wheel(n, sim.time_ns, odom0[n])
     sightings = dict.fromkeys(names, 0)  # the other robots' tags each one reported
-    bumps = 0  # grid cells the robots' bumpers marked
     rec = {n: {"t": [0.0], "est": [starts[i]], "gt": [starts[i]], "odom": [starts[i]]} for i, n in enumerate(names)}
     next_control = 0
     control_ns = int(cfg.control_period * 1e9)
@@ -154,8 +153,7 @@ def run(cfg: TeamConfig, progress: bool = False, coverage_every: float = 0.0) ->
             for n in names:  # the bumpers: what the robots touch is an obstacle
                 touch = sim.contacts(n)
                 if len(touch):
-                    bumps += grid.touch(poses[n], touch, [poses[o][:2] for o in names if o != n])
-                    explorer.bumped(n, touch, poses[n], sim.time_ns * 1e-9)
+                    explorer.bumped(grid, n, touch, poses, sim.time_ns * 1e-9)
             for n, (v, w) in explorer.step(grid, poses, sim.time_ns * 1e-9).items():
                 sim.set_command(n, v, w)
             if explorer.state is State.COMPLETE:
@@ -172,11 +170,11 @@ def run(cfg: TeamConfig, progress: bool = False, coverage_every: float = 0.0) ->
     return {
         "trajectories": trajectories, "update_ms": np.array(mapper.update_ms), "landmarks": {"mean": mean, "cov": cov},
         "dropped": dict(slam.dropped) | dict(mapper.drops), "map_checks": dict(mapper.map_checks),
-        "relocalizations": mapper.relocalizations, "sightings": sightings, "bumped_cells": bumps,
+        "relocalizations": mapper.relocalizations, "sightings": sightings,
         "frontend_drops": {n: dict(f.drops) | (dict(f.fiducials.drops) if f.fiducials else {}) for n, f in frontends.items()},
         "explored_fraction": explored, "coverage": None if coverage is None else np.array(coverage),
         "exploration_state": explorer.state.value, **explorer.controller.counters(),
-        "bumped_goals": explorer.bumped_goals,
+        "bumped_cells": explorer.bumped_cells, "bumped_goals": explorer.bumped_goals,
         "wall_s": time.perf_counter() - wall, "outlier_matches": slam.outlier_pairs / slam.num_particles,
         "occupancy": {"probability": grid.probability(), "known": grid.observed.copy(), "origin": grid.origin,
                       "resolution": grid.res, "free_thresh": cfg.grid.free_below,

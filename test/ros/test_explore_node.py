@@ -121,7 +121,7 @@ def test_a_bumper_contact_is_an_obstacle_at_the_robots_pose_and_bad_clouds_are_c
         bad = contacts_to_cloud(np.array([[0.1, 0.0]]), 3, "robot1/base_link")
         bad.fields = bad.fields[:1]
         node.on_bumper("robot1", bad)
-        assert node.bumped_cells == 1 and node.drops["bad_bumper"] == 1
+        assert node.explorer.bumped_cells == 1 and node.drops["bad_bumper"] == 1
     finally:
         rclpy.shutdown()
 

@@ -372,9 +372,11 @@ def test_a_bumper_pressed_ahead_fails_the_goal_at_once_and_the_robot_backs_off()
     pose = np.array([1.05, 2.05, 0.0])
     ex.step(_open_room(), {"r": pose}, 0.0)
     assert ex.goals["r"] is not None
-    assert not ex.bumped("r", np.array([[-0.1, 0.1]]), pose, 0.2)  # the rear: not pushing into it
-    assert ex.bumped("r", np.array([[0.1, -0.1]]), pose, 0.2)
+    grid = _open_room()
+    # the rear: not pushing into it
+    assert not ex.bumped(grid, "r", np.array([[-0.1, 0.1]]), {"r": pose}, 0.2)
+    assert ex.bumped(grid, "r", np.array([[0.1, -0.1]]), {"r": pose}, 0.2)
     assert ex.goals["r"] is None and len(ex.blacklist) == 1 and ex.bumped_goals == 1
     v, w = ex.step(_open_room(), {"r": pose}, 0.4)["r"]
     assert (v, w) == (-ctl.recovery_speed, 0.0)
-    assert not ex.bumped("r", np.array([[0.1, -0.1]]), pose, 0.6)  # recovering: no goal to fail
+    assert not ex.bumped(grid, "r", np.array([[0.1, -0.1]]), {"r": pose}, 0.6)  # recovering: no goal to fail
