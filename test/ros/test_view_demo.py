@@ -15,7 +15,7 @@ pytest.importorskip("websockets", reason="websockets (the `test` extra) is not i
 
 from foxglove_client import wait_for_server, watch  # noqa: E402
 
-pytestmark = [pytest.mark.ros, pytest.mark.slow]
+pytestmark = [pytest.mark.ros, pytest.mark.slow, pytest.mark.live]
 
 BIN = Path(sys.executable).parent
 ROBOTS = ("robot1", "robot2")
