@@ -159,3 +159,36 @@ def test_the_posterior_odds_are_the_prior_odds_times_the_evidence_ratio():
     at_fit = peak * np.exp(-0.5 * fit @ np.linalg.solve(cov, fit))
     assert res.p_lost[0] == pytest.approx(eps * u / (eps * u + (1 - eps) * at_fit), rel=1e-9)
     assert res.p_lost[0] > 0.5
+
+
+def test_the_likelihood_is_the_mixture_over_candidates_per_point_at_every_pose():
+    """Random frames, poses and particles, some landmarks not held: each (particle, pose) entry
+    is Σ_points log((1 − η)/n_i Σ_{held candidates} N(R f + t − l; 0, R C Rᵀ + Σ_l + σ² I) + η/A),
+    summed term by term with scipy."""
+    from scipy.stats import multivariate_normal
+
+    rng = np.random.default_rng(3)
+    m, s, n = 3, 4, 5
+    frame = np.column_stack([rng.uniform(1, 3, n), rng.uniform(-1, 1, n), np.zeros(n)])
+    a = rng.normal(size=(n, 3, 3)) * 0.05
+    covs = a @ a.transpose(0, 2, 1) + 1e-4 * np.eye(3)
+    pairs = np.array([[0, 0], [1, 0], [2, 1], [3, 2], [4, 2], [5, 2], [6, 4]])
+    poses = rng.uniform(-0.5, 0.5, (m, s, 3))
+    lm = rng.uniform(-1, 3, (m, len(pairs), 3))
+    b = rng.normal(size=(m, len(pairs), 3, 3)) * 0.05
+    lm_cov = b @ b.transpose(0, 1, 3, 2) + 1e-4 * np.eye(3)
+    held = rng.random((m, len(pairs))) < 0.7
+    got = frame_log_likelihood(poses, frame, covs, pairs, lm, lm_cov, held, ETA, LOG_AREA, FLOOR)
+    for i in range(m):
+        for j in range(s):
+            x, y, th = poses[i, j]
+            rot = np.array([[np.cos(th), -np.sin(th)], [np.sin(th), np.cos(th)]])
+            total = 0.0
+            for point in np.unique(pairs[:, 1]):
+                mine = np.flatnonzero(pairs[:, 1] == point)
+                dens = sum(multivariate_normal.pdf(rot @ frame[point, :2] + [x, y] - lm[i, p, :2],
+                                                   cov=rot @ covs[point, :2, :2] @ rot.T + lm_cov[i, p, :2, :2]
+                                                   + FLOOR**2 * np.eye(2))
+                           for p in mine if held[i, p])
+                total += np.log((1 - ETA) / mine.size * dens + ETA / np.exp(LOG_AREA))
+            assert got[i, j] == pytest.approx(total, rel=1e-9)

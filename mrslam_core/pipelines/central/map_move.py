@@ -39,6 +39,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from mrslam_core.geometry.se2 import wrap_angle
+from mrslam_core.pipelines.central.map_move_kernels import frame_log_likelihood_kernel
 from mrslam_core.slam.models import LOG_2PI
 
 
@@ -95,28 +96,19 @@ def frame_log_likelihood(
     if pairs.size == 0:
         return np.zeros((m, n_pose))
     rows = pairs[:, 1]
-    fx, fy = points[rows, 0], points[rows, 1]  # (P,)
-    c, s = np.cos(poses[..., 2])[..., None], np.sin(poses[..., 2])[..., None]  # (M, S, 1)
-    rx = c * fx - s * fy + poses[..., 0:1] - lm_mean[:, None, :, 0]  # (M, S, P)
-    ry = s * fx + c * fy + poses[..., 1:2] - lm_mean[:, None, :, 1]
-    a, b, d = point_covs[rows, 0, 0], point_covs[rows, 0, 1], point_covs[rows, 1, 1]
-    floor2 = floor**2
-    cxx = a * c * c - 2 * b * c * s + d * s * s + lm_cov[:, None, :, 0, 0] + floor2  # R Σ Rᵀ + Σ_lm + σ² I
-    cyy = a * s * s + 2 * b * c * s + d * c * c + lm_cov[:, None, :, 1, 1] + floor2
-    cxy = (a - d) * c * s + b * (c * c - s * s) + lm_cov[:, None, :, 0, 1]
-    det = cxx * cyy - cxy * cxy
-    quad = (cyy * rx * rx - 2 * cxy * rx * ry + cxx * ry * ry) / det
-    log_n = np.where(held[:, None], -0.5 * (quad + np.log(det)) - LOG_2PI, -np.inf)  # (M, S, P)
     starts = np.flatnonzero(np.r_[True, rows[1:] != rows[:-1]])
     count = np.diff(np.r_[starts, rows.size])
-    peak = np.maximum.reduceat(log_n, starts, axis=2)
-    safe = np.where(np.isfinite(peak), peak, 0.0)
-    spread_back = np.repeat(np.arange(starts.size), count)
-    with np.errstate(divide="ignore"):
-        inside = np.log(np.add.reduceat(np.exp(log_n - safe[..., spread_back]), starts, axis=2)) + safe
-    per_point = np.logaddexp(np.log1p(-outlier_probability) - np.log(count) + inside,
-                             np.log(outlier_probability) - log_area)
-    return per_point.sum(axis=2)
+    cov = point_covs[rows]
+
+    def col(x: np.ndarray) -> np.ndarray:
+        return np.ascontiguousarray(x, dtype=float)
+
+    return frame_log_likelihood_kernel(
+        col(poses[..., :3]), col(points[rows, 0]), col(points[rows, 1]), col(cov[:, 0, 0]), col(cov[:, 0, 1]),
+        col(cov[:, 1, 1]), col(lm_mean[..., 0]), col(lm_mean[..., 1]), col(lm_cov[..., 0, 0]),
+        col(lm_cov[..., 0, 1]), col(lm_cov[..., 1, 1]), np.ascontiguousarray(held, dtype=np.bool_),
+        starts.astype(np.int64), count.astype(np.int64), np.log1p(-outlier_probability) - np.log(count),
+        float(np.log(outlier_probability) - log_area), float(floor) ** 2)
 
 
 def _log_normal(x: np.ndarray, mean: np.ndarray, inv: np.ndarray, logdet: float) -> np.ndarray:
