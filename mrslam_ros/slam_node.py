@@ -48,7 +48,7 @@ from visualization_msgs.msg import MarkerArray
 
 from mrslam_core.evaluation.report import latency_summary
 from mrslam_core.geometry.se2 import compose, inverse
-from mrslam_core.pipelines.central import CentralConfig, CentralMapper
+from mrslam_core.pipelines.central import CentralConfig, CentralMapper, map_move
 from mrslam_core.slam.warmup import warm_up
 from mrslam_core.types import ObservationSet
 from mrslam_ros.conversions import (
@@ -152,8 +152,9 @@ class SlamNode(Node):
         self.cfg = read_config(self, SlamNodeConfig)
         self.mapper = self._start_mapper(resume or self.cfg.resume)
         # the compiled kernels load now, before any input is subscribed, not inside the first update
-        # while the input queues fill (slam/warmup.py)
-        self.get_logger().info(f"filter kernels loaded in {warm_up(self.cfg.filter):.2f} s")
+        # or the first map check while the input queues fill (slam/warmup.py, map_move.warm_up)
+        loaded = warm_up(self.cfg.filter) + map_move.warm_up()
+        self.get_logger().info(f"filter and map check kernels loaded in {loaded:.2f} s")
         # input callbacks (their own group, so a multi-threaded executor drains the subscriptions
         # while the filter runs) and everything else share the mapper under this lock
         self.lock = threading.Lock()

@@ -192,3 +192,10 @@ def test_the_likelihood_is_the_mixture_over_candidates_per_point_at_every_pose()
                            for p in mine if held[i, p])
                 total += np.log((1 - ETA) / mine.size * dens + ETA / np.exp(LOG_AREA))
             assert got[i, j] == pytest.approx(total, rel=1e-9)
+
+
+def test_warm_up_loads_the_compiled_likelihood():
+    from mrslam_core.pipelines.central.map_move import warm_up
+    from mrslam_core.pipelines.central.map_move_kernels import frame_log_likelihood_kernel
+
+    assert warm_up() >= 0.0 and frame_log_likelihood_kernel.signatures
