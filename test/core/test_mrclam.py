@@ -1,5 +1,6 @@
 """MR.CLAM dataset 6: reader, dead reckoning, and the joint filter's accuracy against Vicon."""
 
+import multiprocessing
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import replace
 
@@ -63,7 +64,10 @@ def test_joint_filter_accuracy_on_dataset6(mrclam6):
     several centimetres). The misread barcodes are dropped: the map holds the 15 landmarks.
     """
     ds = MrclamDataset(mrclam6)
-    with ProcessPoolExecutor(2) as pool:  # the joint and the independent filters, one core each
+    # the joint and the independent filters, one core each; spawned, not forked: a fork of this
+    # process (pytest-xdist's threads, DDS threads of an earlier test) crashed in the child's
+    # garbage collector once in CI
+    with ProcessPoolExecutor(2, mp_context=multiprocessing.get_context("spawn")) as pool:
         joint_job = pool.submit(run, ds, MrclamConfig())
         indep_job = pool.submit(run, ds, replace(MrclamConfig(), mode="independent"))
         joint, indep = joint_job.result(), indep_job.result()
