@@ -1,7 +1,7 @@
 """The whole suite end to end, as a user runs it: `mrslam demo` (3 robots, separate processes over
 DDS, in the office), then `mrslam replay --offline` on its bag, then evo on its TUM files.
 
-CI runs the demo for SECONDS = 45 simulated s of `make demo`'s 120 (`--seconds`): the graph, the
+CI runs the demo for SECONDS = 30 simulated s of `make demo`'s 120 (`--seconds`): the graph, the
 recording, the replay and the run folder are the same, and the suite stays within its time on the
 2-core machine (the 120 s demo and its replay took 390 s of it). `make demo`'s own figures are in
 docs/results.md."""
@@ -28,7 +28,7 @@ BIN = Path(sys.executable).parent
 # robot within the building's scale (a robot lost by the filter is metres off).
 MAX_LOST_M = 1.5
 MAX_MEDIAN_ATE_M = 0.5
-SECONDS = 45
+SECONDS = 30
 
 
 @pytest.fixture(scope="module")
@@ -55,10 +55,10 @@ def test_the_team_is_localised_against_ground_truth(demo_run):
         assert r["ate_rmse_m"] <= MAX_LOST_M, (name, r)
     ates = sorted(r["ate_rmse_m"] for r in report["robots"].values())
     assert ates[1] <= MAX_MEDIAN_ATE_M, report["robots"]
-    # live demos explored 39-75 % of the office in 120 s; in one process the team explores 28 % by
-    # 40 s and 37 % by 50 s (`mrslam team`, seed 0), 5 % standing at the start: 12 % is missed only
+    # live demos explored 39-75 % of the office in 120 s; in one process the team explores 16 % by
+    # 20 s and 21 % by 30 s (`mrslam team`, seed 0), 5 % standing at the start: 8 % is missed only
     # by a team that does not explore
-    assert report["explored_fraction"] > 0.12
+    assert report["explored_fraction"] > 0.08
 
 
 def test_the_central_node_kept_up(demo_run):
@@ -109,5 +109,5 @@ def test_the_run_folder_holds_the_occupancy_map_as_a_ros_map_file(demo_run):
     corner = [v / grid["block"] for v in meta["origin"][:2]]
     assert corner == pytest.approx([round(v) for v in corner], abs=1e-6)
     free_m2 = (pixels == FREE).sum() * grid["resolution"] ** 2
-    # the office has 213 m² of floor a robot can reach; the run explores more than 12 % of it
-    assert free_m2 > 0.08 * 213 and (pixels == OCCUPIED).any()
+    # the office has 213 m² of floor a robot can reach; the run explores more than 8 % of it
+    assert free_m2 > 0.06 * 213 and (pixels == OCCUPIED).any()
