@@ -1,7 +1,5 @@
 """MR.CLAM dataset 6: reader, dead reckoning, and the joint filter's accuracy against Vicon."""
 
-import multiprocessing
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import replace
 
 import numpy as np
@@ -61,16 +59,11 @@ def test_joint_filter_accuracy_on_dataset6(mrclam6):
     Robot 4 (no landmark from 240 s to 340 s, dead reckoning in between) is the largest, at up
     to 19 % of its calibrated dead reckoning. The bounds are the top of that spread plus
     0.015-0.02 m (the filter is chaotic: a 1 µs change of the odometry delay moves a robot by
-    several centimetres). The misread barcodes are dropped: the map holds the 15 landmarks.
+    several centimetres). The misread barcodes are dropped: the map holds the 15 landmarks. The
+    five independent filters (0.45-0.49 m, 5x the joint filter's) are reported in docs/results.md,
+    not run here: they doubled the test's CPU time for a comparison with that margin.
     """
-    ds = MrclamDataset(mrclam6)
-    # the joint and the independent filters, one core each; spawned, not forked: a fork of this
-    # process (pytest-xdist's threads, DDS threads of an earlier test) crashed in the child's
-    # garbage collector once in CI
-    with ProcessPoolExecutor(2, mp_context=multiprocessing.get_context("spawn")) as pool:
-        joint_job = pool.submit(run, ds, MrclamConfig())
-        indep_job = pool.submit(run, ds, replace(MrclamConfig(), mode="independent"))
-        joint, indep = joint_job.result(), indep_job.result()
+    joint = run(MrclamDataset(mrclam6), MrclamConfig())
     ate = {n: robot_metrics(tr) for n, tr in joint["trajectories"].items()}
     for name, m in ate.items():
         assert m["ate_rmse_m"] <= (0.17 if name == "robot4" else 0.11), (name, m)
@@ -78,5 +71,3 @@ def test_joint_filter_accuracy_on_dataset6(mrclam6):
     mean_joint = np.mean([m["ate_rmse_m"] for m in ate.values()])
     assert mean_joint <= 0.12
     assert len(joint["landmarks"]["mean"]) == 15
-    mean_indep = np.mean([robot_metrics(tr)["ate_rmse_m"] for tr in indep["trajectories"].values()])
-    assert mean_joint < mean_indep
