@@ -1,5 +1,8 @@
 """``mrslam experiment stereo_frontend FORMAT PATH``: the stereo frontend and its visual odometry on
 a real sequence with ground truth, and the stereo noise calibrated on it.
+``mrslam experiment stereo_frontend sim WORLD [WORLD ...] --calibrate``: the same pairs and
+calibration on the simulated team's rendered stereo (the closed loop of ``mrslam team`` with its
+profile, in each world, every robot's frames against the simulator's true poses).
 
 Per frame: points published (of B), and every track continued from the previous frame (each
 published point's track, and every other one the frontend kept) moved into the world with the
@@ -18,20 +21,27 @@ shape ten times wider), so the few outliers do not inflate σ. The frontend's ow
 from __future__ import annotations
 
 import argparse
+import collections
 import dataclasses
+from collections.abc import Callable
 
 import numpy as np
 from scipy.optimize import minimize
+from scipy.special import log_expit
 
 from mrslam_core.datasets.stereo import StereoSequence, open_sequence
 from mrslam_core.experiments._output import write_tables
 from mrslam_core.frontend.config import FrontendConfig
-from mrslam_core.frontend.frontend import Frontend
+from mrslam_core.frontend.camera import StereoRig
+from mrslam_core.frontend.frontend import Frontend, StereoFrame
+from mrslam_core.geometry.se2 import matrix_from_planar
 from mrslam_core.geometry.stereo import triangulation_jacobian
 from mrslam_core.pipelines.dataset import vo_endpoint
 
 CHI2_3_3SIGMA = 14.16  # χ²(3) quantile at 99.73 %
 OUTLIER_SCALE = 10.0  # standard deviations of the contaminating component, relative
+#: the least camera motion [m], [rad] between two views whose track pairs are used
+MIN_VIEW_CHANGE = (0.01, np.radians(0.5))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -55,49 +65,100 @@ class TrackPairs:
         return (np.einsum("nij,j,nkj->nik", self.jac_a, v, self.jac_a)
                 + np.einsum("nij,j,nkj->nik", self.jac_b, v, self.jac_b))
 
+    @staticmethod
+    def concatenate(parts: list[TrackPairs], sigma: np.ndarray) -> TrackPairs:
+        """The pairs of ``parts`` in one set (all published with ``sigma``)."""
+        return TrackPairs(*(np.concatenate([getattr(p, k) for p in parts]) for k in ("nu", "jac_a", "jac_b")),
+                          np.asarray(sigma, float))
+
     def mahalanobis2(self, sigma: np.ndarray | None = None) -> np.ndarray:
         """(P,) νᵀS⁻¹ν under ``sigma`` (default: the published σ)."""
         s = self.covariance(self.sigma if sigma is None else sigma)
         return np.einsum("ni,ni->n", self.nu, np.linalg.solve(s, self.nu[..., None])[..., 0])
 
 
-def run_frontend(seq: StereoSequence, cfg: FrontendConfig) -> dict:
-    """The frontend over a sequence with ground truth: points per frame, the track pairs and the
-    visual odometry's poses."""
-    if seq.ground_truth is None:
-        raise ValueError(f"{seq.name} has no ground truth")
-    rig = seq.rig
-    fe = Frontend(rig, cfg)
-    t_base_rect = rig.t_base_rect
-    points, vo, prev = [], [], None
-    nu, ja, jb = [], [], []
-    for i in range(len(seq)):
-        left, right = seq.read(i)
-        obs, _ = fe.step(left, right, int(seq.frames[i].stamp_ns))
-        if obs is None:
-            prev = None
-            continue
-        frame = fe.last_frame
-        points.append(len(obs))
-        vo.append((i, fe.odometry.pose))
-        world = seq.ground_truth[i] @ t_base_rect  # world <- rectified left camera
+class PairCollector:
+    """The :class:`TrackPairs` of one frontend's frames: each track seen ``lag`` frames before,
+    both points moved into the world by the true poses.
+
+    A dropped frame (``add(None, ...)``) ends the pairs across it, as the frontend's tracks do.
+    Two views less than :data:`MIN_VIEW_CHANGE` apart give no pairs: a standing robot's renderings
+    repeat the same pixel errors, so their differences measure nothing of the noise between views.
+    """
+
+    def __init__(self, rig: StereoRig, lag: int = 1):
+        if lag < 1:
+            raise ValueError(f"lag must be >= 1, got {lag}")
+        self.rig = rig
+        self._prev: collections.deque = collections.deque(maxlen=lag)  # (pose, ids, points, jacobians)
+        self._nu: list[np.ndarray] = []
+        self._ja: list[np.ndarray] = []
+        self._jb: list[np.ndarray] = []
+
+    def add(self, frame: StereoFrame | None, world_base: np.ndarray) -> None:
+        """One frame: ``frame`` the frontend's (None: dropped), ``world_base`` (4, 4) the true
+        world <- base_link pose at it [m]."""
+        if frame is None:
+            self._prev.clear()
+            return
+        rig = self.rig
+        world = world_base @ rig.t_base_rect  # world <- rectified left camera
         jac = world[:3, :3] @ triangulation_jacobian(frame.xy[:, 1], frame.xy[:, 0], frame.disparity,
                                                      rig.f, rig.cx, rig.cy, rig.baseline)
         pts = frame.points @ world[:3, :3].T + world[:3, 3]
-        if prev is not None:
-            p_ids, p_pts, p_jac = prev
+        if len(self._prev) == self._prev.maxlen and _view_changed(self._prev[0][0], world):
+            _, p_ids, p_pts, p_jac = self._prev[0]
             index = {int(t): k for k, t in enumerate(p_ids)}
-            for k, tid in enumerate(frame.track_ids):
-                j = index.get(int(tid))
-                if j is not None:
-                    nu.append(pts[k] - p_pts[j])
-                    ja.append(p_jac[j])
-                    jb.append(jac[k])
-        prev = (frame.track_ids, pts, jac)
-    pairs = TrackPairs(np.array(nu).reshape(-1, 3), np.array(ja).reshape(-1, 3, 3), np.array(jb).reshape(-1, 3, 3),
-                       np.array([cfg.sigma_d, cfg.sigma_r, cfg.sigma_c]))
+            pairs = [(k, index[int(t)]) for k, t in enumerate(frame.track_ids) if int(t) in index]
+            if pairs:
+                k, j = np.array(pairs).T
+                self._nu.append(pts[k] - p_pts[j])
+                self._ja.append(p_jac[j])
+                self._jb.append(jac[k])
+        self._prev.append((world, frame.track_ids, pts, jac))
+
+    def pairs(self, sigma: np.ndarray) -> TrackPairs:
+        """The pairs so far; ``sigma`` (3,) the (σd, σr, σc) [px] the frontend published with."""
+        def stack(parts: list[np.ndarray], shape: tuple[int, ...]) -> np.ndarray:
+            return np.concatenate(parts) if parts else np.zeros((0, *shape))
+
+        return TrackPairs(stack(self._nu, (3,)), stack(self._ja, (3, 3)), stack(self._jb, (3, 3)),
+                          np.asarray(sigma, float))
+
+
+def _view_changed(a: np.ndarray, b: np.ndarray) -> bool:
+    """Whether camera poses ``a`` and ``b`` (4, 4) differ by at least :data:`MIN_VIEW_CHANGE`."""
+    rel = np.linalg.solve(a, b)
+    angle = np.arccos(np.clip((np.trace(rel[:3, :3]) - 1.0) / 2.0, -1.0, 1.0))
+    return bool(np.linalg.norm(rel[:3, 3]) >= MIN_VIEW_CHANGE[0] or angle >= MIN_VIEW_CHANGE[1])
+
+
+def _sigma(cfg: FrontendConfig) -> np.ndarray:
+    return np.array([cfg.sigma_d, cfg.sigma_r, cfg.sigma_c])
+
+
+def _with_sigma(cfg: FrontendConfig, sigma: np.ndarray) -> FrontendConfig:
+    return dataclasses.replace(cfg, sigma_d=float(sigma[0]), sigma_r=float(sigma[1]), sigma_c=float(sigma[2]))
+
+
+def run_frontend(seq: StereoSequence, cfg: FrontendConfig, lag: int = 1) -> dict:
+    """The frontend over a sequence with ground truth: points per frame, the track pairs (a
+    track's points ``lag`` frames apart) and the visual odometry's poses."""
+    if seq.ground_truth is None:
+        raise ValueError(f"{seq.name} has no ground truth")
+    fe = Frontend(seq.rig, cfg)
+    collector = PairCollector(seq.rig, lag)
+    points, vo = [], []
+    for i in range(len(seq)):
+        left, right = seq.read(i)
+        obs, _ = fe.step(left, right, int(seq.frames[i].stamp_ns))
+        collector.add(None if obs is None else fe.last_frame, seq.ground_truth[i])
+        if obs is None:
+            continue
+        points.append(len(obs))
+        vo.append((i, fe.odometry.pose))
     idx = np.array([i for i, _ in vo])
-    return {"points": np.array(points), "pairs": pairs, "vo": np.array([p for _, p in vo]),
+    return {"points": np.array(points), "pairs": collector.pairs(_sigma(cfg)), "vo": np.array([p for _, p in vo]),
             "vo_frames": idx, "vo_failures": fe.vo_failures}
 
 
@@ -106,17 +167,16 @@ def fit_noise(pairs: TrackPairs) -> tuple[np.ndarray, float]:
     k2 = OUTLIER_SCALE**2
 
     def nll(p: np.ndarray) -> float:
-        sigma, eps = np.exp(p[:3]), 1.0 / (1.0 + np.exp(-p[3]))
-        s = pairs.covariance(sigma)
+        s = pairs.covariance(np.exp(np.clip(p[:3], -20.0, 20.0)))  # the simplex may step far out
         logdet = np.linalg.slogdet(s)[1]
         m2 = np.einsum("ni,ni->n", pairs.nu, np.linalg.solve(s, pairs.nu[..., None])[..., 0])
-        inlier = np.log1p(-eps) - 0.5 * (logdet + m2)
-        outlier = np.log(eps) - 0.5 * (logdet + 3 * np.log(k2) + m2 / k2)
+        inlier = log_expit(-p[3]) - 0.5 * (logdet + m2)  # log(1 - ε), ε = expit(p[3])
+        outlier = log_expit(p[3]) - 0.5 * (logdet + 3 * np.log(k2) + m2 / k2)
         return -float(np.logaddexp(inlier, outlier).sum())
 
     start = np.r_[np.log(pairs.sigma), -2.0]
     res = minimize(nll, start, method="Nelder-Mead", options={"maxiter": 4000, "xatol": 1e-4, "fatol": 1e-6})
-    return np.exp(res.x[:3]), float(1.0 / (1.0 + np.exp(-res.x[3])))
+    return np.exp(res.x[:3]), float(np.exp(log_expit(res.x[3])))
 
 
 def evaluate(seq: StereoSequence, cfg: FrontendConfig) -> dict:
@@ -139,16 +199,63 @@ def evaluate(seq: StereoSequence, cfg: FrontendConfig) -> dict:
     return out | {"_pairs": r["pairs"]}
 
 
-def calibrate(seq: StereoSequence, cfg: FrontendConfig, rounds: int = 3) -> tuple[FrontendConfig, list[dict]]:
-    """Fit (σd, σr, σc), rerun the frontend with them, and fit again (module docstring)."""
+def calibrate(collect: Callable[[FrontendConfig], TrackPairs], cfg: FrontendConfig,
+              rounds: int = 3) -> tuple[FrontendConfig, list[dict]]:
+    """Fit (σd, σr, σc) to the pairs ``collect(cfg)`` gives, collect again with the fitted σ, and
+    fit again (module docstring)."""
     history = []
     for _ in range(rounds):
-        pairs = run_frontend(seq, cfg)["pairs"]
+        pairs = collect(cfg)
         sigma, eps = fit_noise(pairs)
+        m2 = pairs.mahalanobis2()
         history.append({"sigma_in": pairs.sigma.tolist(), "sigma_fit": sigma.tolist(), "outliers": eps,
-                        "pairs": int(len(pairs.nu))})
-        cfg = dataclasses.replace(cfg, sigma_d=float(sigma[0]), sigma_r=float(sigma[1]), sigma_c=float(sigma[2]))
+                        "pairs": int(len(pairs.nu)), "nees_median": float(np.median(m2)) if m2.size else float("nan")})
+        cfg = _with_sigma(cfg, sigma)
     return cfg, history
+
+
+def sim_pairs(worlds: list[str], seconds: float, cfg: FrontendConfig, lag: int = 1) -> TrackPairs:
+    """The track pairs (points ``lag`` frames apart) of every robot of the simulated team
+    (``TeamConfig``'s defaults, frontend ``cfg``, the simulator's seed 0) in each of ``worlds``
+    over ``seconds`` simulated s, against the simulator's true poses."""
+    from mrslam_core.pipelines.team import TeamConfig
+    from mrslam_core.pipelines.team import run as run_team
+
+    parts = []
+    for world in worlds:
+        base = TeamConfig(seconds=seconds)
+        collectors: dict[str, PairCollector] = {}
+
+        def on_frame(robot: str, fe: Frontend, truth: np.ndarray, dropped: bool) -> None:
+            c = collectors.setdefault(robot, PairCollector(fe.rig, lag))
+            c.add(None if dropped else fe.last_frame, matrix_from_planar(truth))
+
+        run_team(dataclasses.replace(base, sim=dataclasses.replace(base.sim, world=world), frontend=cfg),
+                 on_frame=on_frame)
+        parts += [c.pairs(_sigma(cfg)) for c in collectors.values()]
+    return TrackPairs.concatenate(parts, _sigma(cfg))
+
+
+def _calibration_table(history: list[dict]) -> str:
+    return ("\n\nCalibration (maximum likelihood, contaminated normal):\n\n"
+            "| round | σ in (d, r, c) [px] | pairs | NEES median at σ in | σ fit | outliers |\n|---|---|---|---|---|---|\n"
+            + "\n".join(f"| {i + 1} | {', '.join(f'{v:.3f}' for v in h['sigma_in'])} | {h['pairs']} | "
+                        f"{h['nees_median']:.2f} | {', '.join(f'{v:.3f}' for v in h['sigma_fit'])} | "
+                        f"{100 * h['outliers']:.1f} % |" for i, h in enumerate(history)))
+
+
+def _main_sim(args: argparse.Namespace) -> int:
+    from mrslam_core.pipelines.team import TeamConfig
+
+    base = TeamConfig().frontend
+    _, history = calibrate(lambda c: sim_pairs(args.path, args.seconds, c, args.lag), base, args.rounds)
+    text = (f"Stereo noise of the simulated team's rendered stereo: {', '.join(args.path)}, {args.seconds:g} s each, "
+            f"pairs {args.lag} frame(s) apart, "
+            f"every robot, the team profile's frontend (σd/σr/σc = {base.sigma_d}/{base.sigma_r}/{base.sigma_c} px)"
+            + _calibration_table(history))
+    write_tables(args.out, f"stereo_frontend_sim_lag{args.lag}", text,
+                 {"worlds": args.path, "seconds": args.seconds, "lag": args.lag, "calibration": history})
+    return 0
 
 
 def main(argv: list[str]) -> int:
@@ -158,15 +265,24 @@ def main(argv: list[str]) -> int:
     profile = PROFILES / "real_stereo.yaml"
     ap = argparse.ArgumentParser(prog="mrslam experiment stereo_frontend", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("format")
-    ap.add_argument("path")
-    ap.add_argument("--config", default=str(profile), help="profile whose frontend section is used")
+    ap.add_argument("format", help="kitti, euroc, or sim (the simulated team)")
+    ap.add_argument("path", nargs="+", help="the sequence folder; for sim, one or more world names")
+    ap.add_argument("--config", default=str(profile), help="profile whose frontend section is used (not sim: the team's)")
     ap.add_argument("--modes", nargs="+", default=["harris+usurf", "orb+orb", "sift+sift"],
                     help="detector+descriptor pairs to evaluate")
     ap.add_argument("--calibrate", action="store_true", help="also fit the stereo noise (σd, σr, σc)")
+    ap.add_argument("--rounds", type=int, default=3, help="calibration rounds (each reruns the frontend)")
+    ap.add_argument("--seconds", type=float, default=60.0, help="sim: simulated seconds a world")
+    ap.add_argument("--lag", type=int, default=1,
+                    help="calibrate on a track's points this many frames apart (errors correlated from frame to "
+                         "frame fit a smaller σ at lag 1 than at larger lags)")
     ap.add_argument("--out", default="runs/experiments")
     args = ap.parse_args(argv)
-    seq = open_sequence(args.format, args.path)
+    if args.format == "sim":
+        return _main_sim(args)
+    if len(args.path) != 1:
+        ap.error(f"{args.format}: one sequence folder")
+    seq = open_sequence(args.format, args.path[0])
     base = load_profile(DatasetRunConfig, args.config).frontend
     rows, data = [], {"sequence": seq.name, "modes": {}}
     for mode in args.modes:
@@ -185,11 +301,8 @@ def main(argv: list[str]) -> int:
             "| NEES median | VO end error | VO heading | VO failures |\n|---|---|---|---|---|---|---|---|---|---|\n"
             + "\n".join(rows))
     if args.calibrate:
-        _, history = calibrate(seq, base)
+        _, history = calibrate(lambda c: run_frontend(seq, c, args.lag)["pairs"], base, args.rounds)
         data["calibration"] = history
-        text += "\n\nCalibration (maximum likelihood, contaminated normal):\n\n| round | σ in (d, r, c) | σ fit | outliers |\n|---|---|---|---|\n"
-        text += "\n".join(f"| {i + 1} | {', '.join(f'{v:.3f}' for v in h['sigma_in'])} | "
-                          f"{', '.join(f'{v:.3f}' for v in h['sigma_fit'])} | {100 * h['outliers']:.1f} % |"
-                          for i, h in enumerate(history))
+        text += _calibration_table(history)
     write_tables(args.out, f"stereo_frontend_{seq.name}", text, data)
     return 0

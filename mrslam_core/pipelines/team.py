@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Literal
@@ -83,13 +84,18 @@ class TeamConfig:
             raise ValueError(f"odometry must be one of {SOURCES}, not {self.odometry!r}")
 
 
-def run(cfg: TeamConfig, progress: bool = False, coverage_every: float = 0.0) -> dict:
+def run(cfg: TeamConfig, progress: bool = False, coverage_every: float = 0.0,
+        on_frame: Callable[[str, Frontend, np.ndarray, bool], None] | None = None) -> dict:
     """Run the closed loop; returns trajectories, step times, the map and counters (among them
     ``sightings``: per robot, the other robots' tags its frontend reported).
 
     ``coverage_every`` > 0: every that many simulated seconds [s], and at the end, the explored
     fraction of the world's reachable free area is recorded as "coverage" (C, 2): time [s],
     fraction (else "coverage" is None).
+
+    ``on_frame(robot, frontend, truth, dropped)``: called after each frontend step with the
+    robot's true pose (3,) (x [m], y [m], θ [rad]) at the frame; ``dropped``: the frontend
+    published nothing for it (tools that compare frames with the truth).
     """
     sim = Simulation(cfg.sim, fiducials=cfg.fiducials)
     names = [f"robot{i + 1}" for i in range(cfg.robots)]
@@ -126,6 +132,8 @@ def run(cfg: TeamConfig, progress: bool = False, coverage_every: float = 0.0) ->
             delta = between(at_frame[n], odom)
             at_frame[n] = odom
             obs, scan = frontends[n].step(frame.left, frame.right, frame.stamp_ns, odometry=planar_motion(delta))
+            if on_frame is not None:
+                on_frame(n, frontends[n], sim.ground_truth(n), obs is None)
             feed.wheel(n, frame.stamp_ns, odom)
             feed.visual(n, frontends[n].odometry)
             if obs is None:  # a dropped frame: the next set carries its motion
