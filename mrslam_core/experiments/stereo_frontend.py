@@ -40,7 +40,7 @@ from mrslam_core.pipelines.dataset import vo_endpoint
 
 CHI2_3_3SIGMA = 14.16  # χ²(3) quantile at 99.73 %
 OUTLIER_SCALE = 10.0  # standard deviations of the contaminating component, relative
-#: the least camera motion [m], [rad] between two views whose track pairs are used
+#: on renderings, the least camera motion [m], [rad] between two views whose track pairs are used
 MIN_VIEW_CHANGE = (0.01, np.radians(0.5))
 
 
@@ -82,14 +82,17 @@ class PairCollector:
     both points moved into the world by the true poses.
 
     A dropped frame (``add(None, ...)``) ends the pairs across it, as the frontend's tracks do.
-    Two views less than :data:`MIN_VIEW_CHANGE` apart give no pairs: a standing robot's renderings
-    repeat the same pixel errors, so their differences measure nothing of the noise between views.
+    Two views less than ``min_view_change`` (translation [m], rotation [rad]) apart give no pairs:
+    for renderings (:data:`MIN_VIEW_CHANGE`), whose standing robot repeats the same pixel errors,
+    so their differences measure nothing of the noise between views. A real camera's still frames
+    differ by its sensor noise and are kept (the default, 0).
     """
 
-    def __init__(self, rig: StereoRig, lag: int = 1):
+    def __init__(self, rig: StereoRig, lag: int = 1, min_view_change: tuple[float, float] = (0.0, 0.0)):
         if lag < 1:
             raise ValueError(f"lag must be >= 1, got {lag}")
         self.rig = rig
+        self.min_view_change = min_view_change
         self._prev: collections.deque = collections.deque(maxlen=lag)  # (pose, ids, points, jacobians)
         self._nu: list[np.ndarray] = []
         self._ja: list[np.ndarray] = []
@@ -106,7 +109,7 @@ class PairCollector:
         jac = world[:3, :3] @ triangulation_jacobian(frame.xy[:, 1], frame.xy[:, 0], frame.disparity,
                                                      rig.f, rig.cx, rig.cy, rig.baseline)
         pts = frame.points @ world[:3, :3].T + world[:3, 3]
-        if len(self._prev) == self._prev.maxlen and _view_changed(self._prev[0][0], world):
+        if len(self._prev) == self._prev.maxlen and _view_change(self._prev[0][0], world, self.min_view_change):
             _, p_ids, p_pts, p_jac = self._prev[0]
             index = {int(t): k for k, t in enumerate(p_ids)}
             pairs = [(k, index[int(t)]) for k, t in enumerate(frame.track_ids) if int(t) in index]
@@ -126,11 +129,12 @@ class PairCollector:
                           np.asarray(sigma, float))
 
 
-def _view_changed(a: np.ndarray, b: np.ndarray) -> bool:
-    """Whether camera poses ``a`` and ``b`` (4, 4) differ by at least :data:`MIN_VIEW_CHANGE`."""
+def _view_change(a: np.ndarray, b: np.ndarray, least: tuple[float, float]) -> bool:
+    """Whether camera poses ``a`` and ``b`` (4, 4) differ by at least ``least`` (translation [m]
+    or rotation [rad])."""
     rel = np.linalg.solve(a, b)
     angle = np.arccos(np.clip((np.trace(rel[:3, :3]) - 1.0) / 2.0, -1.0, 1.0))
-    return bool(np.linalg.norm(rel[:3, 3]) >= MIN_VIEW_CHANGE[0] or angle >= MIN_VIEW_CHANGE[1])
+    return bool(np.linalg.norm(rel[:3, 3]) >= least[0] or angle >= least[1])
 
 
 def _sigma(cfg: FrontendConfig) -> np.ndarray:
@@ -164,6 +168,8 @@ def run_frontend(seq: StereoSequence, cfg: FrontendConfig, lag: int = 1) -> dict
 
 def fit_noise(pairs: TrackPairs) -> tuple[np.ndarray, float]:
     """Maximum-likelihood (σd, σr, σc) [px] and outlier fraction ε of the pairs (module docstring)."""
+    if len(pairs.nu) < 10:
+        raise ValueError(f"{len(pairs.nu)} track pairs: too few to fit the stereo noise")
     k2 = OUTLIER_SCALE**2
 
     def nll(p: np.ndarray) -> float:
@@ -227,7 +233,7 @@ def sim_pairs(worlds: list[str], seconds: float, cfg: FrontendConfig, lag: int =
         collectors: dict[str, PairCollector] = {}
 
         def on_frame(robot: str, fe: Frontend, truth: np.ndarray, dropped: bool) -> None:
-            c = collectors.setdefault(robot, PairCollector(fe.rig, lag))
+            c = collectors.setdefault(robot, PairCollector(fe.rig, lag, MIN_VIEW_CHANGE))
             c.add(None if dropped else fe.last_frame, matrix_from_planar(truth))
 
         run_team(dataclasses.replace(base, sim=dataclasses.replace(base.sim, world=world), frontend=cfg),
