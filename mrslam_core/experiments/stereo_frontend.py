@@ -34,7 +34,7 @@ from mrslam_core.experiments._output import write_tables
 from mrslam_core.frontend.config import FrontendConfig
 from mrslam_core.frontend.camera import StereoRig
 from mrslam_core.frontend.frontend import Frontend, StereoFrame
-from mrslam_core.geometry.se2 import matrix_from_planar
+from mrslam_core.frontend.odometry import planar_motion
 from mrslam_core.geometry.stereo import triangulation_jacobian
 from mrslam_core.pipelines.dataset import vo_endpoint
 
@@ -66,10 +66,10 @@ class TrackPairs:
                 + np.einsum("nij,j,nkj->nik", self.jac_b, v, self.jac_b))
 
     @staticmethod
-    def concatenate(parts: list[TrackPairs], sigma: np.ndarray) -> TrackPairs:
-        """The pairs of ``parts`` in one set (all published with ``sigma``)."""
+    def concatenate(parts: list[TrackPairs]) -> TrackPairs:
+        """The pairs of ``parts`` (one or more, all published with the same σ) in one set."""
         return TrackPairs(*(np.concatenate([getattr(p, k) for p in parts]) for k in ("nu", "jac_a", "jac_b")),
-                          np.asarray(sigma, float))
+                          parts[0].sigma)
 
     def mahalanobis2(self, sigma: np.ndarray | None = None) -> np.ndarray:
         """(P,) νᵀS⁻¹ν under ``sigma`` (default: the published σ)."""
@@ -234,12 +234,12 @@ def sim_pairs(worlds: list[str], seconds: float, cfg: FrontendConfig, lag: int =
 
         def on_frame(robot: str, fe: Frontend, truth: np.ndarray, dropped: bool) -> None:
             c = collectors.setdefault(robot, PairCollector(fe.rig, lag, MIN_VIEW_CHANGE))
-            c.add(None if dropped else fe.last_frame, matrix_from_planar(truth))
+            c.add(None if dropped else fe.last_frame, planar_motion(truth))  # world <- base_link
 
         run_team(dataclasses.replace(base, sim=dataclasses.replace(base.sim, world=world), frontend=cfg),
                  on_frame=on_frame)
         parts += [c.pairs(_sigma(cfg)) for c in collectors.values()]
-    return TrackPairs.concatenate(parts, _sigma(cfg))
+    return TrackPairs.concatenate(parts)
 
 
 def _calibration_table(history: list[dict]) -> str:

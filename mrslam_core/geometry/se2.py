@@ -85,14 +85,3 @@ def planar_from_matrix(pose: np.ndarray) -> np.ndarray:
     pose = np.asarray(pose, float)
     return np.stack([pose[..., 0, 3], pose[..., 1, 3], np.arctan2(pose[..., 1, 0], pose[..., 0, 0])], axis=-1)
 
-
-def matrix_from_planar(pose: np.ndarray) -> np.ndarray:
-    """(..., 4, 4) homogeneous poses of (..., 3) planar ones x [m], y [m], yaw [rad] (z = 0): the
-    inverse of :func:`planar_from_matrix`."""
-    pose = np.asarray(pose, float)
-    c, s = np.cos(pose[..., 2]), np.sin(pose[..., 2])
-    out = np.zeros(pose.shape[:-1] + (4, 4))
-    out[..., 0, 0], out[..., 0, 1], out[..., 1, 0], out[..., 1, 1] = c, -s, s, c
-    out[..., 0, 3], out[..., 1, 3] = pose[..., 0], pose[..., 1]
-    out[..., 2, 2] = out[..., 3, 3] = 1.0
-    return out

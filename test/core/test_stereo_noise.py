@@ -10,7 +10,8 @@ import pytest
 from mrslam_core.experiments.stereo_frontend import MIN_VIEW_CHANGE, PairCollector, TrackPairs, fit_noise
 from mrslam_core.frontend import CameraCalibration, StereoRig
 from mrslam_core.frontend.frontend import StereoFrame
-from mrslam_core.geometry.se2 import matrix_from_planar, planar_from_matrix
+from mrslam_core.frontend.odometry import planar_motion
+from mrslam_core.geometry.se2 import planar_from_matrix
 from mrslam_core.geometry.stereo import project, triangulate, triangulation_jacobian
 
 F, CX, CY, B = 400.0, 320.0, 240.0, 0.1
@@ -30,7 +31,7 @@ def rig() -> StereoRig:
 
 def frame_of(world_pts: np.ndarray, ids: list[int], pose: np.ndarray, rig: StereoRig, d_shift: np.ndarray) -> StereoFrame:
     """The frame a camera at planar ``pose`` sees of ``world_pts``, disparities shifted by ``d_shift`` [px]."""
-    cam = np.linalg.inv(matrix_from_planar(pose) @ rig.t_base_rect)
+    cam = np.linalg.inv(planar_motion(pose) @ rig.t_base_rect)
     rcd = project(world_pts @ cam[:3, :3].T + cam[:3, 3], F, CX, CY, B)
     rcd[:, 2] += d_shift
     n = len(ids)
@@ -40,9 +41,9 @@ def frame_of(world_pts: np.ndarray, ids: list[int], pose: np.ndarray, rig: Stere
                        track_length=np.ones(n, np.int64))
 
 
-def test_planar_pose_matrix_round_trip():
+def test_a_planar_pose_as_a_matrix_and_back():
     pose = np.array([[1.5, -2.0, 0.3], [0.0, 4.0, -3.0]])
-    m = matrix_from_planar(pose)
+    m = np.array([planar_motion(p) for p in pose])
     np.testing.assert_allclose(m[0, :3, :3], [[np.cos(0.3), -np.sin(0.3), 0], [np.sin(0.3), np.cos(0.3), 0], [0, 0, 1]])
     np.testing.assert_allclose(m[1, :3, 3], [0.0, 4.0, 0.0])
     np.testing.assert_allclose(planar_from_matrix(m), pose, atol=1e-15)
@@ -55,13 +56,13 @@ def test_pairs_are_the_world_differences_of_a_track_and_a_drop_ends_them():
     fa = frame_of(world[:3], [5, 6, 7], a, r, np.zeros(3))
     fb = frame_of(world[[2, 1, 3]], [7, 6, 8], b, r, np.array([0.0, 1.0, 0.0]))  # track 6: 1 px more disparity
     c = PairCollector(r)
-    c.add(fa, matrix_from_planar(a))
-    c.add(fb, matrix_from_planar(b))
+    c.add(fa, planar_motion(a))
+    c.add(fb, planar_motion(b))
     pairs = c.pairs(np.array([0.2, 0.4, 0.5]))
     assert pairs.nu.shape == (2, 3)  # tracks 7 and 6, in the second frame's order
     np.testing.assert_allclose(pairs.nu[0], 0.0, atol=1e-12)
     # track 6 in frame b: the point the shifted disparity puts nearer the camera, in the world
-    wb = matrix_from_planar(b) @ r.t_base_rect
+    wb = planar_motion(b) @ r.t_base_rect
     shifted = wb[:3, :3] @ fb.points[1] + wb[:3, 3]
     np.testing.assert_allclose(pairs.nu[1], shifted - world[1], atol=1e-12)
     assert np.linalg.norm(pairs.nu[1]) > 0.1
@@ -70,20 +71,20 @@ def test_pairs_are_the_world_differences_of_a_track_and_a_drop_ends_them():
     np.testing.assert_array_equal(pairs.sigma, [0.2, 0.4, 0.5])
 
     c = PairCollector(r)
-    c.add(fa, matrix_from_planar(a))
-    c.add(None, matrix_from_planar(a))
-    c.add(fb, matrix_from_planar(b))
+    c.add(fa, planar_motion(a))
+    c.add(None, planar_motion(a))
+    c.add(fb, planar_motion(b))
     assert c.pairs(np.ones(3)).nu.shape == (0, 3)
 
     # views 5 mm and 0.1° apart: no pairs from renderings; two frames back (lag 2): the pairs of a and b
     for least, expected in (((0.0, 0.0), 3), (MIN_VIEW_CHANGE, 0)):  # a real camera's still frames count
         c = PairCollector(r, min_view_change=least)
-        c.add(fa, matrix_from_planar(a))
-        c.add(fa, matrix_from_planar(a + [0.005, 0.0, 0.002]))
+        c.add(fa, planar_motion(a))
+        c.add(fa, planar_motion(a + [0.005, 0.0, 0.002]))
         assert len(c.pairs(np.ones(3)).nu) == expected
     c = PairCollector(r, lag=2)
     for f, pose in ((fa, a), (fb, b), (fb, b)):
-        c.add(f, matrix_from_planar(pose))
+        c.add(f, planar_motion(pose))
     np.testing.assert_allclose(c.pairs(np.ones(3)).nu, pairs.nu, atol=1e-12)
 
 
