@@ -274,3 +274,19 @@ def test_bad_input():
     with pytest.raises(SimError, match="no robots"):
         with Simulation(FAST) as sim:
             sim.step_until_frame()
+
+
+@pytest.mark.parametrize("v", [0.3, -0.3])
+def test_a_side_touching_a_wall_slides_along_it(v):
+    """Heading north with its right side against the west wall (face at x = 0.05), the robot
+    drives along the wall both ways at full speed: a contact normal perpendicular to the heading
+    does not block the wheels, whatever the sign of cos(π/2)'s rounding in the dot product."""
+    with Simulation(FAST) as sim:
+        sim.add_robot("r", np.array([0.05 + BODY.width / 2 - 0.002, 2.0, np.pi / 2]))
+        sim.step()
+        assert len(sim.contacts("r")) >= 1
+        sim.set_command("r", v, 0.0)
+        sim.run_until(sim.time_ns + int(1e9))  # 0.3 m, short of the small world's box at y = 1.3
+        x, y, th = sim.ground_truth("r")
+        assert y - 2.0 == pytest.approx(v, abs=0.01)
+        assert abs(th - np.pi / 2) < 1e-3 and abs(x - (0.05 + BODY.width / 2)) < 0.01
