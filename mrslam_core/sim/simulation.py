@@ -42,10 +42,8 @@ from mrslam_core.sim.world import World, load_world
 MAX_PENETRATION = 0.01
 #: a contact whose normal is within this of perpendicular to the heading (|cos| [-], 0.57°) does
 #: not block the wheels: the robot's flat side rubs along a wall or a corner, as a real one slides,
-#: and a metre of it pushes in at most MAX_PENETRATION, where the depth check takes over. Decided
-#: by the dot product's sign alone, the contact solver's 1e-7 rad nudges and rounding blocked
-#: every other step: a robot whose side touched a shelf corner crept 3 cm back and forth for 38 s
-#: (docs/results.md, "Any building").
+#: and a metre of it pushes in at most MAX_PENETRATION, where the depth check takes over. The dot
+#: product's sign alone is decided by rounding and by the contact solver's 1e-7 rad nudges.
 SLIDE_COSINE = 0.01
 _LUMA = np.array([77, 150, 29], np.uint16)  # ITU-R BT.601 weights ×256
 
@@ -300,9 +298,10 @@ class Simulation:
 
         The wheels do not slip sideways: a robot moves along its heading or not at all. Driving
         into an obstacle stops it (it does not slide along a wall, which no wheel odometry could
-        see), and what the contact solver does to a robot turning against an obstacle is kept
-        only along its heading; a step that would push it deeper than :data:`MAX_PENETRATION`
-        into an obstacle is not taken.
+        see; a heading within :data:`SLIDE_COSINE` of parallel to the contact drives on), and
+        what the contact solver does to a robot turning against an obstacle is kept only along
+        its heading; a step that would push it deeper than :data:`MAX_PENETRATION` into an
+        obstacle is not taken.
         """
         d, dt, cid = self.config.drive, self._dt, self.client
         depth = np.zeros(len(self._names))  # deepest contact at the current poses (negative: penetrating) [m]
