@@ -227,9 +227,9 @@ def sim_pairs(worlds: list[str], seconds: float, cfg: FrontendConfig, lag: int =
     from mrslam_core.pipelines.team import TeamConfig
     from mrslam_core.pipelines.team import run as run_team
 
+    base = TeamConfig(seconds=seconds)
     parts = []
     for world in worlds:
-        base = TeamConfig(seconds=seconds)
         collectors: dict[str, PairCollector] = {}
 
         def on_frame(robot: str, fe: Frontend, truth: np.ndarray, dropped: bool) -> None:

@@ -84,4 +84,3 @@ def planar_from_matrix(pose: np.ndarray) -> np.ndarray:
     plane of the map (yaw = atan2(R10, R00))."""
     pose = np.asarray(pose, float)
     return np.stack([pose[..., 0, 3], pose[..., 1, 3], np.arctan2(pose[..., 1, 0], pose[..., 0, 0])], axis=-1)
-
