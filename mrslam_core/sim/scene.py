@@ -56,7 +56,7 @@ def _texture_image(kind: str, shape: tuple[int, int], rng: np.random.Generator, 
 
 
 def _load_texture(client: int, img: np.ndarray, folder: Path, name: str) -> int:
-    path = folder / f"{name}.png"
+    path = folder / f"{name}.bmp"
     cv2.imwrite(str(path), cv2.cvtColor(img, cv2.COLOR_RGB2BGR))
     return p.loadTexture(str(path), physicsClientId=client)
 
@@ -77,7 +77,8 @@ def build_scene(client: int, world: World, seed: int, density: float, folder: Pa
 
     Each piece is one static body with a box collision shape and a textured mesh. Textures come
     from ``np.random.default_rng([seed, kind, piece])``, so a world looks the same for a seed
-    whatever else happens; PNG files go to ``folder`` (pybullet loads textures from files).
+    whatever else happens; BMP files go to ``folder`` (pybullet loads textures from files; an
+    uncompressed file writes and loads in a third of a PNG's time, texel for texel the same).
 
     Returns:
         the body ids, floor first.
