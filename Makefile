@@ -34,9 +34,10 @@ mrclam: venv
 
 # Two passes: the tests that run in one process (and short graphs) on both cores, then the live
 # multi-process team runs alone, since they run against the wall clock and need the cores to
-# themselves (marker `live`, pyproject.toml).
+# themselves (marker `live`, pyproject.toml). The first pass hands out whole modules, those with a
+# slow test first (test/conftest.py), so that no minute-long module starts when the rest is done.
 test: venv
-	$(PY) -m pytest -q --durations=15 -n 2 --dist loadfile -m "not live"
+	$(PY) -m pytest -q --durations=15 -n 2 --dist loadfile --no-loadscope-reorder -m "not live"
 	$(PY) -m pytest -q --durations=15 -m live
 
 bench: venv

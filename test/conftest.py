@@ -42,3 +42,14 @@ def euroc_micro(shared_data: Path) -> Path:
     if not (folder / "cam0" / "sensor.yaml").is_file():
         pytest.skip(f"EuRoC micro sample not found at {folder}")
     return folder
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Modules that hold a slow test run first, each module's tests in their own order.
+
+    `make test` hands whole modules to its two workers (``--dist loadfile
+    --no-loadscope-reorder``). xdist's default order, modules with the most tests first, handed the
+    real-data and world-gate modules (one to six tests of 1-5 min each) out last, and one worker
+    ran them while the other had finished: longest first is what balances the two."""
+    slow = {item.path for item in items if item.get_closest_marker("slow") is not None}
+    items.sort(key=lambda item: item.path not in slow)
