@@ -201,9 +201,10 @@ class OdometryIntegrator:
             dx = np.where(small, v * dt * np.cos(th0), v / w * (np.sin(th0 + w * dt) - np.sin(th0)))
             dy = np.where(small, v * dt * np.sin(th0), -v / w * (np.cos(th0 + w * dt) - np.cos(th0)))
         self.t = t
-        self.poses = np.column_stack(
+        # column-major: np.interp takes each column as it is instead of copying all N samples per query
+        self.poses = np.asfortranarray(np.column_stack(
             [np.concatenate([[0.0], np.cumsum(dx)[:-1]]), np.concatenate([[0.0], np.cumsum(dy)[:-1]]), th0]
-        )
+        ))
 
     def pose(self, t: np.ndarray | float) -> np.ndarray:
         """Odometry-frame pose(s) at t [s] (clamped to the log's span), (..., 3), θ unwrapped."""
