@@ -5,7 +5,7 @@ issue 29's accuracy criterion.
 
 Worlds: of ``worldgen.suite(12)`` (the suite of docs/results.md's sweep), the one of least area
 of each kind. Runs: 2 robots, 30 simulated s, simulator and filter seed 0 (``sweep.team_config``),
-about 25 s of wall time each on the 2-core CI machine.
+50-80 s of wall time each on the 2-core CI machine.
 
 The criterion (issue 29): ATE ≤ 0.10 m and ≤ 30 % of the robot's odometry ATE. Over 30 s a
 robot's dead reckoning can be nearly as good as a working filter: in these four worlds over seeds

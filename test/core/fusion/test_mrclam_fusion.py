@@ -15,8 +15,8 @@ from mrslam_core.pipelines.mrclam import run as run_known_start
 
 @pytest.mark.slow
 def test_unknown_start_robots_are_merged_and_tracked(mrclam6):
-    """First 300 s, M = 300, seed 0 (~25 s: the unknown-start run, the known-start run and robot 1
-    alone, each through the central mapper). The bounds are relative to runs of the same seed, so
+    """First 300 s, M = 300, seed 0 (about 100 s on the 2-core CI machine: the unknown-start run,
+    the known-start run and robot 1 alone, each through the central mapper). The bounds are relative to runs of the same seed, so
     that they measure the joins and not one seed's filter noise; each holds with a margin over
     filter seeds 0–4 (measured, docs/fusion.md "The slow test"):
     - robot 3's first mutual sighting with robot 1 is held and the second (17.6 s) confirms it;
