@@ -16,9 +16,10 @@ from mrslam_core.pipelines.mrclam import run as run_known_start
 @pytest.mark.slow
 def test_unknown_start_robots_are_merged_and_tracked(mrclam6):
     """First 300 s, M = 300, seed 0 (about 100 s on the 2-core CI machine: the unknown-start run,
-    the known-start run and robot 1 alone, each through the central mapper). The bounds are relative to runs of the same seed, so
-    that they measure the joins and not one seed's filter noise; each holds with a margin over
-    filter seeds 0–4 (measured, docs/fusion.md "The slow test"):
+    the known-start run and robot 1 alone, each through the central mapper). The bounds are
+    relative to runs of the same seed, so that they measure the joins and not one seed's filter
+    noise; each holds with a margin over filter seeds 0–4 (measured, docs/fusion.md "The slow
+    test"):
     - robot 3's first mutual sighting with robot 1 is held and the second (17.6 s) confirms it;
       robots 2 and 5 join by map alignment at 35–41 s (4 and 7 inliers), robot 4 at 73–87 s
       (5–6 inliers);
