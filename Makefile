@@ -14,10 +14,13 @@ venv: $(STAMP)
 # wheels' rosidl generators (needs cmake, make and a C compiler) into $(VENV)/ros_interfaces,
 # made importable by $(VENV)/lib/python3.11/site-packages/mrslam_interfaces.pth (see mrslam_ros/env.py).
 INTERFACES := $(wildcard mrslam_ros/interfaces/*/package.xml mrslam_ros/interfaces/*/CMakeLists.txt mrslam_ros/interfaces/*/msg/*.msg)
+# uv installs the same releases as pip (compared package by package) in about half the time of
+# pip's 108 s here; pip remains the fallback where uv cannot be had or fails.
+EXTRAS := .[ros,rosgen,test,baselines,view]
 $(STAMP): pyproject.toml scripts/build_interfaces.sh $(INTERFACES)
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
-	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e ".[ros,rosgen,test,baselines,view]"
+	( $(PY) -m pip install --quiet uv && $(VENV)/bin/uv pip install --quiet --compile-bytecode --python $(PY) -e "$(EXTRAS)" ) \
+	  || ( echo "uv failed; installing with pip"; $(PY) -m pip install --quiet --upgrade pip && $(PY) -m pip install --quiet -e "$(EXTRAS)" )
 	scripts/build_interfaces.sh $(VENV)
 	touch $(STAMP)
 

@@ -160,6 +160,7 @@ def run(cfg: DemoConfig, out: Path, log=sys.stdout, view=None) -> dict:
     """Run the team, record it, stop it; returns what the report needs (``view``: the view
     node's spec, or None)."""
     import rclpy
+    from rclpy.experimental import EventsExecutor
     from rclpy.parameter import Parameter
 
     from mrslam_ros.bag import BagRecorder
@@ -178,6 +179,11 @@ def run(cfg: DemoConfig, out: Path, log=sys.stdout, view=None) -> dict:
     rclpy.init(args=[])
     node = rclpy.create_node("mrslam_demo", parameter_overrides=[Parameter("use_sim_time", value=True)])
     recorder = BagRecorder(node, bag, topics, cfg.storage)
+    # rclpy's C++ events executor: the Python one rebuilds its wait set of the ~40 recorded topics
+    # for every message, about 3 ms a message at the demo's 200 a second (a 30 s demo: the
+    # launcher's CPU 28 -> 15 s, the same messages in the bag).
+    executor = EventsExecutor()
+    executor.add_node(node)
     end_ns = int(cfg.team.seconds * 1e9)
     wall0 = time.monotonic()
     failed: list[str] = []
@@ -191,7 +197,7 @@ def run(cfg: DemoConfig, out: Path, log=sys.stdout, view=None) -> dict:
         down: set[str] = set()
         injected = []
         while True:
-            rclpy.spin_once(node, timeout_sec=0.05)
+            executor.spin_once(timeout_sec=0.05)
             now = node.get_clock().now().nanoseconds
             if now >= end_ns:
                 break
@@ -229,6 +235,7 @@ def run(cfg: DemoConfig, out: Path, log=sys.stdout, view=None) -> dict:
     finally:
         codes = launcher.stop()
         recorder.close()
+        executor.shutdown()
         node.destroy_node()
         rclpy.try_shutdown()
     return {"facts": facts, "bag": bag, "exit_codes": codes, "failed": failed, "faults": injected,
