@@ -30,7 +30,7 @@ from mrslam_core.slam.config import FilterConfig
 from mrslam_core.slam.landmarks import LandmarkStore
 from mrslam_core.slam.models import ObservationModel, RangeBearingModel, make_model
 from mrslam_core.slam.motion import predict_motion, sample_motion
-from mrslam_core.slam.proposal_kernels import deleted_residuals, sum_terms
+from mrslam_core.slam.proposal_kernels import sum_terms
 from mrslam_core.slam.resampling import (
     copy_plan,
     effective_sample_fraction,
@@ -575,11 +575,13 @@ class MultiRobotFastSLAM:
         """Classify the pairs by their deleted residual against ``gate``, refit the proposal on
         the inliers, and repeat (``association.outlier_rounds`` in all).
 
-        A pair's deleted residual is its innovation against the proposal fitted without it,
-        χ²(dim) for an inlier (``proposal_kernels.deleted_residuals``). The residual at the fit's
-        own mode against Zⱼ alone is not: a pair that dominates the fit (the only one, or one of
-        two) is explained by the pose it pulled, and would pass any gate. The rounds re-sum the
-        per-pair ``terms`` of :meth:`_fold` and never evaluate the observation model again.
+        A pair's deleted residual is its innovation against the proposal fitted without it: with
+        Λ₋ⱼ = Λ − HⱼᵀZⱼ⁻¹Hⱼ and η₋ⱼ = η − HⱼᵀZⱼ⁻¹νⱼ (the pair's own terms taken out when it is in
+        the fit), νⱼ − HⱼΛ₋ⱼ⁻¹η₋ⱼ against Zⱼ + HⱼΛ₋ⱼ⁻¹Hⱼᵀ, χ²(dim) for an inlier. The residual at
+        the fit's own mode against Zⱼ alone is not: a pair that dominates the fit (the only one,
+        or one of two) is explained by the pose it pulled, and would pass any gate. The rounds
+        re-sum the per-pair ``terms`` of :meth:`_fold` and never evaluate the observation model
+        again.
 
         Args:
             fit: the :meth:`_combine` result on every pair.
@@ -587,16 +589,26 @@ class MultiRobotFastSLAM:
         Returns:
             ((P,) inlier mask, the :meth:`_combine` result on the final inliers).
         """
-        nu, zinv, hx = terms[4:]
-        index = np.ascontiguousarray(mi, np.int64)
-        inlier = np.ones(mi.size, bool)  # the pairs ``fit`` is on
+        info_p, eta_p, _, _, nu, zinv, hx = terms
+        z_cov = sym_inv_det(zinv)[0]
+        fitted = np.ones(mi.size, bool)
+        inlier = None
         for _ in range(self.config.association.outlier_rounds):
-            shift = fit[0] - x_hat
+            mode, lam = fit[0], lam0 + fit[4]
+            shift = mode - x_hat
             shift[:, 2] = wrap_angle(shift[:, 2])
-            now = deleted_residuals(index, inlier, shift, fit[1], nu, zinv, hx) <= gate
-            if np.array_equal(now, inlier):
+            eta = (lam @ shift[..., None])[..., 0]
+            own = fitted[:, None, None]
+            lam_j = lam[mi] - np.where(own, info_p, 0.0)
+            cov_j = sym_inv_det(lam_j)[0]
+            eta_j = eta[mi] - np.where(fitted[:, None], eta_p, 0.0)
+            resid = nu - (hx @ (cov_j @ eta_j[..., None]))[..., 0]
+            s_j = z_cov + hx @ cov_j @ np.swapaxes(hx, -1, -2)
+            with np.errstate(invalid="ignore"):
+                now = quad_form(resid, sym_inv_det(s_j)[0]) <= gate
+            if inlier is not None and np.array_equal(now, inlier):
                 break
-            inlier = now
+            inlier = fitted = now
             fit = self._combine(x_hat, mi, terms, lam0, p_det, inlier)
         return inlier, fit
 
