@@ -554,7 +554,7 @@ class MultiRobotFastSLAM:
                 gate = self.config.association.outlier_gate
                 if gate > 0:
                     inlier, (mode, cov, ll, nis, info) = self._robust_fold(
-                        x_hat, mi, terms, lam0, p_det, (mode, cov, ll, nis, info), gate
+                        x_hat, mi, terms, lam0, p_det, mode, gate
                     )
                     counts = np.bincount(mi[inlier], minlength=m)
                 log_l += np.where(counts > 0, ll, 0.0)
@@ -570,46 +570,29 @@ class MultiRobotFastSLAM:
 
     def _robust_fold(
         self, x_hat: np.ndarray, mi: np.ndarray, terms: tuple, lam0: np.ndarray, p_det: np.ndarray,
-        fit: tuple, gate: float,
+        mode: np.ndarray, gate: float,
     ) -> tuple[np.ndarray, tuple]:
-        """Classify the pairs by their deleted residual against ``gate``, refit the proposal on
-        the inliers, and repeat (``association.outlier_rounds`` in all).
+        """Classify the pairs at ``mode`` by their residual νᵀZ⁻¹ν against ``gate``, refit the
+        proposal on the inliers, and repeat (``association.outlier_rounds`` in all).
 
-        A pair's deleted residual is its innovation against the proposal fitted without it: with
-        Λ₋ⱼ = Λ − HⱼᵀZⱼ⁻¹Hⱼ and η₋ⱼ = η − HⱼᵀZⱼ⁻¹νⱼ (the pair's own terms taken out when it is in
-        the fit), νⱼ − HⱼΛ₋ⱼ⁻¹η₋ⱼ against Zⱼ + HⱼΛ₋ⱼ⁻¹Hⱼᵀ, χ²(dim) for an inlier. The residual at
-        the fit's own mode against Zⱼ alone is not: a pair that dominates the fit (the only one,
-        or one of two) is explained by the pose it pulled, and would pass any gate. The rounds
-        re-sum the per-pair ``terms`` of :meth:`_fold` and never evaluate the observation model
-        again.
-
-        Args:
-            fit: the :meth:`_combine` result on every pair.
+        The residual at the mode is the linearised one the proposal itself uses,
+        ν − Hₓ(mode − x̂), so the rounds re-sum the per-pair ``terms`` of :meth:`_fold` and never
+        evaluate the observation model again.
 
         Returns:
             ((P,) inlier mask, the :meth:`_combine` result on the final inliers).
         """
-        info_p, eta_p, _, _, nu, zinv, hx = terms
-        z_cov = sym_inv_det(zinv)[0]
-        fitted = np.ones(mi.size, bool)
+        nu, zinv, hx = terms[4:]
         inlier = None
         for _ in range(self.config.association.outlier_rounds):
-            mode, lam = fit[0], lam0 + fit[4]
-            shift = mode - x_hat
-            shift[:, 2] = wrap_angle(shift[:, 2])
-            eta = (lam @ shift[..., None])[..., 0]
-            own = fitted[:, None, None]
-            lam_j = lam[mi] - np.where(own, info_p, 0.0)
-            cov_j = sym_inv_det(lam_j)[0]
-            eta_j = eta[mi] - np.where(fitted[:, None], eta_p, 0.0)
-            resid = nu - (hx @ (cov_j @ eta_j[..., None]))[..., 0]
-            s_j = z_cov + hx @ cov_j @ np.swapaxes(hx, -1, -2)
-            with np.errstate(invalid="ignore"):
-                now = quad_form(resid, sym_inv_det(s_j)[0]) <= gate
+            dx = mode[mi] - x_hat[mi]
+            dx[:, 2] = wrap_angle(dx[:, 2])
+            now = quad_form(nu - (hx @ dx[..., None])[..., 0], zinv) <= gate
             if inlier is not None and np.array_equal(now, inlier):
                 break
-            inlier = fitted = now
+            inlier = now
             fit = self._combine(x_hat, mi, terms, lam0, p_det, inlier)
+            mode = fit[0]
         return inlier, fit
 
     def _combine(
