@@ -181,7 +181,7 @@ def run(cfg: DemoConfig, out: Path, log=sys.stdout, view=None) -> dict:
     recorder = BagRecorder(node, bag, topics, cfg.storage)
     # rclpy's C++ events executor: the Python one rebuilds its wait set of the ~40 recorded topics
     # for every message, about 3 ms a message at the demo's 200 a second (a 30 s demo: the
-    # launcher's CPU 28 -> 15 s, the same messages in the bag).
+    # launcher's CPU 31 -> 15 s, the same messages in the bag).
     executor = EventsExecutor()
     executor.add_node(node)
     end_ns = int(cfg.team.seconds * 1e9)
