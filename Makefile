@@ -21,10 +21,13 @@ INTERFACES := $(wildcard mrslam_ros/interfaces/*/package.xml mrslam_ros/interfac
 EXTRAS := .[ros,rosgen,test,baselines,view]
 $(STAMP): pyproject.toml scripts/build_interfaces.sh $(INTERFACES)
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
-	( $(PY) -m pip install --quiet uv && $(VENV)/bin/uv pip install --quiet --python $(PY) -e "$(EXTRAS)" ) \
-	  || ( echo "uv failed; installing with pip"; $(PY) -m pip install --quiet --upgrade pip && $(PY) -m pip install --quiet -e "$(EXTRAS)" )
-	( $(PY) -m compileall -q -j 0 -x '/tests?/' "$$($(PY) -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])')" > /dev/null || true ) & \
-	  scripts/build_interfaces.sh $(VENV) && wait
+	( $(PY) -m pip install --quiet uv \
+	  && $(VENV)/bin/uv pip install --quiet --python $(PY) -e "$(EXTRAS)" ) \
+	|| ( echo "uv failed; installing with pip"; $(PY) -m pip install --quiet --upgrade pip \
+	  && $(PY) -m pip install --quiet -e "$(EXTRAS)" )
+	site="$$($(PY) -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])')"; \
+	( $(PY) -m compileall -q -j 0 -x '/tests?/' "$$site" > /dev/null || true ) & \
+	scripts/build_interfaces.sh $(VENV) && wait
 	touch $(STAMP)
 
 # The main job: a simulated team of 3 robots exploring the office for 120 s, as separate ROS 2
