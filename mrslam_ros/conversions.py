@@ -336,12 +336,16 @@ def path_msg(poses: np.ndarray, stamps_ns: np.ndarray, frame_id: str) -> Path:
     msg.header.frame_id = frame_id
     if len(stamps_ns):
         msg.header.stamp = ns_to_stamp(int(stamps_ns[-1]))
-    for p, t in zip(poses, stamps_ns):
-        ps = PoseStamped()
-        ps.header.frame_id = frame_id
-        ps.header.stamp = ns_to_stamp(int(t))
-        ps.pose = pose_to_msg(p)
-        msg.poses.append(ps)
+    msg.poses = [pose_stamped_msg(p, int(t), frame_id) for p, t in zip(poses, stamps_ns)]
+    return msg
+
+
+def pose_stamped_msg(pose: np.ndarray, stamp_ns: int, frame_id: str) -> PoseStamped:
+    """Planar pose (x [m], y [m], θ [rad]) (3,) at ``stamp_ns`` in ``frame_id`` -> PoseStamped."""
+    msg = PoseStamped()
+    msg.header.frame_id = frame_id
+    msg.header.stamp = ns_to_stamp(int(stamp_ns))
+    msg.pose = pose_to_msg(pose)
     return msg
 
 

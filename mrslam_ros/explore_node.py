@@ -43,7 +43,7 @@ from mrslam_ros.conversions import (
     occupancy_msg,
     path_msg,
     points_marker,
-    pose_to_msg,
+    pose_stamped_msg,
     stamp_to_ns,
 )
 from mrslam_ros.diagnostics import Diagnostics
@@ -188,11 +188,8 @@ class ExploreNode(Node):
             self.cmd_pub[robot].publish(twist)
             goal = self.explorer.goals.get(robot)
             if goal is not None:
-                msg = PoseStamped()
-                msg.header.stamp = self.get_clock().now().to_msg()
-                msg.header.frame_id = self.cfg.map_frame
-                msg.pose = pose_to_msg(np.array([goal.target[0], goal.target[1], 0.0]))
-                self.goal_pub[robot].publish(msg)
+                self.goal_pub[robot].publish(pose_stamped_msg(np.array([goal.target[0], goal.target[1], 0.0]),
+                                                              clock_ns, self.cfg.map_frame))
             if goal is not self._planned.get(robot):
                 self._planned[robot] = goal
                 path = np.zeros((0, 2)) if goal is None else np.asarray(goal.path, float).reshape(-1, 2)

@@ -33,7 +33,7 @@ def _matched(slam, feeder, topic: str):
 def test_slam_node_tracks_two_robots():
     import rclpy
     from geometry_msgs.msg import PoseWithCovarianceStamped
-    from nav_msgs.msg import Odometry
+    from nav_msgs.msg import Odometry, Path as PathMsg
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.parameter import Parameter
     from sensor_msgs.msg import PointCloud2
@@ -56,8 +56,10 @@ def test_slam_node_tracks_two_robots():
         odom_pub = {r: feeder.create_publisher(Odometry, f"/{r}/odom", 100) for r in world.robots}
         obs_pub = {r: feeder.create_publisher(PointCloud2, f"/{r}/observations", 20) for r in world.robots}
         got = {r: [] for r in world.robots}
+        paths = {r: [] for r in world.robots}
         for r in world.robots:
             feeder.create_subscription(PoseWithCovarianceStamped, f"/{r}/pose", lambda m, r=r: got[r].append(m), 100)
+            feeder.create_subscription(PathMsg, f"/{r}/path", lambda m, r=r: paths[r].append(m), 10)
         ex = SingleThreadedExecutor()
         ex.add_node(slam)
         ex.add_node(feeder)
@@ -91,8 +93,18 @@ def test_slam_node_tracks_two_robots():
         end = time.time() + 10
         while time.time() < end and min(len(v) for v in got.values()) < steps - 1:
             ex.spin_once(timeout_sec=0.05)
+        # the path, sent on the node's map timer, holds every pose sent on /pose
+        end = time.time() + 5
+        while time.time() < end and any(not p or len(p[-1].poses) < len(got[r]) for r, p in paths.items()):
+            ex.spin_once(timeout_sec=0.05)
         for r in world.robots:
             assert len(got[r]) >= steps - 5, (r, len(got[r]), dict(slam.diag.drops))
+            path = paths[r][-1]
+            assert len(path.poses) == len(got[r])
+            assert path.header.stamp == got[r][-1].header.stamp
+            for ps, pw in zip(path.poses, got[r]):
+                assert ps.header.stamp == pw.header.stamp and ps.header.frame_id == pw.header.frame_id == "map"
+                np.testing.assert_array_equal(msg_to_pose(ps.pose), msg_to_pose(pw.pose.pose))
             last = got[r][-1]
             stamp = last.header.stamp.sec * 1_000_000_000 + last.header.stamp.nanosec
             err = np.linalg.norm(msg_to_pose(last.pose.pose)[:2] - truth_at[(r, stamp)][:2])
