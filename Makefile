@@ -17,9 +17,7 @@ INTERFACES := $(wildcard mrslam_ros/interfaces/*/package.xml mrslam_ros/interfac
 # uv installs the same releases as pip (compared package by package) in a quarter of pip's 108 s
 # here; pip remains the fallback where uv cannot be had or fails. uv leaves the bytecode to the
 # first import, which the demo's six node processes would each do at once: it is compiled here (all
-# but the packages' own test suites), beside the interfaces' build (30 s for both, 37 s in turn)
-# and the numba kernels' (mrslam_core/pipelines/warmup.py: 20 s, which the central node of the
-# first demo otherwise spent while the simulated clock ran).
+# but the packages' own test suites), beside the interfaces' build (30 s for both, 37 s in turn).
 EXTRAS := .[ros,rosgen,test,baselines,view]
 $(STAMP): pyproject.toml scripts/build_interfaces.sh $(INTERFACES)
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -29,7 +27,6 @@ $(STAMP): pyproject.toml scripts/build_interfaces.sh $(INTERFACES)
 	  && $(PY) -m pip install --quiet -e "$(EXTRAS)" )
 	site="$$($(PY) -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])')"; \
 	( $(PY) -m compileall -q -j 0 -x '/tests?/' "$$site" > /dev/null || true ) & \
-	$(PY) -m mrslam_core.pipelines.warmup & \
 	scripts/build_interfaces.sh $(VENV) && wait
 	touch $(STAMP)
 
