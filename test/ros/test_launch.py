@@ -98,7 +98,9 @@ def test_cli_ctrl_c_stops_every_node(tmp_path, sigint_ignored):
     # sigint_ignored: started as a background job of a non-interactive shell (`cmd &`), which
     # passes SIGINT on ignored
     cfg = tmp_path / "launch.yaml"
-    cfg.write_text(yaml.safe_dump({"stop_timeout": 2.0, "nodes": [
+    # a long stop_timeout: a node that ignored the SIGINT would be sent SIGTERM only after it, and
+    # on a loaded machine (a CI run: 4.1 s against a 2 s timeout) rclpy's exit can take seconds
+    cfg.write_text(yaml.safe_dump({"stop_timeout": 15.0, "nodes": [
         {"module": "launch_dummy", "name": "a", "namespace": "robot1"},
         {"module": "launch_dummy", "name": "b", "namespace": "robot2"}]}))
     ignore = (lambda: signal.signal(signal.SIGINT, signal.SIG_IGN)) if sigint_ignored else None
@@ -116,9 +118,9 @@ def test_cli_ctrl_c_stops_every_node(tmp_path, sigint_ignored):
     time.sleep(0.5)  # let both finish writing their first line (a signal inside print() is a traceback)
     t0 = time.monotonic()
     proc.send_signal(signal.SIGINT)
-    out, _ = proc.communicate(timeout=20)
+    out, _ = proc.communicate(timeout=60)
     assert proc.returncode == 0, out
-    assert time.monotonic() - t0 < 2.0  # the first signal (SIGINT) was enough: no 2 s SIGTERM wait
+    assert time.monotonic() - t0 < 15.0  # the first signal (SIGINT) was enough: no SIGTERM after 15 s
     assert not any(_alive(p) for p in pids.values())
     assert "[robot1/a] interrupted" in out and "[robot2/b] interrupted" in out, out
 
