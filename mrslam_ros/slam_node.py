@@ -170,7 +170,7 @@ class SlamNode(Node):
         # and sent after every update it cost O(N) an update (14 % of the node's CPU samples in a
         # 60 s demo, growing with the run)
         self.paths: dict[str, PathMsg] = {r: self._path(self.mapper.trajectory[r]) for r in robots}
-        self._path_sent = {r: -1 for r in robots}
+        self._path_sent = {r: len(p.poses) for r, p in self.paths.items()}  # sent once it grows
         self.pose_pub = {r: self.create_publisher(PoseWithCovarianceStamped, f"/{r}/pose", 10) for r in robots}
         self.path_pub = {r: self.create_publisher(PathMsg, f"/{r}/path", 10) for r in robots}
         self.tf_pub = self.create_publisher(TFMessage, "/tf", 100)
@@ -445,6 +445,7 @@ class SlamNode(Node):
         for robot, path in self.paths.items():
             if len(path.poses) != self._path_sent[robot] and self.path_pub[robot].get_subscription_count():
                 self._path_sent[robot] = len(path.poses)
+                path.header.stamp = path.poses[-1].header.stamp
                 self.path_pub[robot].publish(path)
         for name, values in (("update_ms", update_ms), ("latency_ms", list(self.latency_ms)[-500:])):
             if values:
@@ -470,9 +471,7 @@ class SlamNode(Node):
     # ------------------------------------------------------------------ output
     def publish(self, robot: str, stamp: int, pose: np.ndarray, cov: np.ndarray, odom: np.ndarray) -> None:
         self.pose_pub[robot].publish(pose_with_covariance(pose, cov, stamp, self.cfg.map_frame))
-        path = self.paths[robot]
-        path.poses.append(pose_stamped_msg(pose, stamp, self.cfg.map_frame))
-        path.header.stamp = path.poses[-1].header.stamp
+        self.paths[robot].poses.append(pose_stamped_msg(pose, stamp, self.cfg.map_frame))
         map_to_odom = compose(pose, inverse(odom))  # map <- odom = map <- base ⊕ base <- odom
         self.tf_pub.publish(TFMessage(transforms=[transform_msg(map_to_odom, stamp, self.cfg.map_frame, f"{robot}/odom")]))
 

@@ -121,7 +121,6 @@ def test_a_set_is_mapped_when_it_arrives_not_when_the_timer_comes():
     import rclpy
     from geometry_msgs.msg import PoseWithCovarianceStamped
     from nav_msgs.msg import Odometry
-    from rclpy.executors import SingleThreadedExecutor
     from rclpy.parameter import Parameter
     from sensor_msgs.msg import PointCloud2
 
@@ -145,12 +144,7 @@ def test_a_set_is_mapped_when_it_arrives_not_when_the_timer_comes():
         obs_pub = feeder.create_publisher(PointCloud2, f"/{robot}/observations", 20)
         got = []
         feeder.create_subscription(PoseWithCovarianceStamped, f"/{robot}/pose", got.append, 100)
-        ex = SingleThreadedExecutor()
-        ex.add_node(slam)
-        ex.add_node(feeder)
-        end = time.time() + 10
-        while time.time() < end and (slam.unsubscribed or feeder.count_subscribers(f"/{robot}/observations") == 0):
-            ex.spin_once(timeout_sec=0.05)
+        spin = _matched(slam, feeder, f"/{robot}/observations")
         odom = np.zeros(3)
         m = Odometry()
         m.pose.pose = pose_to_msg(odom)
@@ -164,14 +158,12 @@ def test_a_set_is_mapped_when_it_arrives_not_when_the_timer_comes():
             m.header.stamp = ns_to_stamp(u.stamp_ns)
             m.pose.pose = pose_to_msg(odom)
             odom_pub.publish(m)
-            for _ in range(3):
-                ex.spin_once(timeout_sec=0.01)
+            spin(3)
             obs_pub.publish(observations_to_cloud(u.observations, f"{robot}/base_link"))
-            for _ in range(5):
-                ex.spin_once(timeout_sec=0.01)
+            spin(5)
         end = time.time() + 5
         while time.time() < end and len(got) < steps:
-            ex.spin_once(timeout_sec=0.05)
+            spin(1)
         assert len(got) == steps, (len(got), dict(slam.diag.drops))
         assert time.time() - t0 < 30  # well before the 60 s timer first fires
     finally:
