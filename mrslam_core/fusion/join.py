@@ -40,7 +40,7 @@ from mrslam_core.fusion.acceptance import (
     reference_spread,
     with_marginals,
 )
-from mrslam_core.fusion.alignment import match_descriptors, rigid_transform_2d, transform_jacobian
+from mrslam_core.fusion.alignment import apply_transform, match_descriptors, transform_jacobian
 from mrslam_core.fusion.config import FusionConfig
 from mrslam_core.fusion.maps import FusionError, LandmarkMap
 from mrslam_core.geometry.se2 import compose
@@ -149,6 +149,40 @@ def systematic_draw(log_w: np.ndarray, n: int, rng: np.random.Generator) -> np.n
     return np.searchsorted(cdf, u, side="right").clip(0, log_w.size - 1)
 
 
+def gls_pair_transforms(
+    transform: np.ndarray, src: np.ndarray, dst: np.ndarray, cov_src: np.ndarray, cov_dst: np.ndarray, w: np.ndarray,
+    iterations: int = 3,
+) -> np.ndarray:
+    """Each row's transform refitted by generalised least squares of dst ≈ R·src + t over its
+    pairs, each residual with its covariance Σ_dst + R·Σ_src·Rᵀ (Gauss–Newton from ``transform``).
+    A stereo landmark is far less certain in depth than across (σ grows with the square of the
+    range), so an unweighted fit reads the depth errors of a few far landmarks as a turn.
+
+    Args:
+        transform: (M, 3) start (tx [m], ty [m], θ [rad]), source frame → target frame.
+        src, dst: (M, P, 2) [m] the pairs' planar positions in the source and target frames.
+        cov_src, cov_dst: (M, P, 2, 2) [m²] their covariances.
+        w: (M, P) 1 for a pair the row holds, 0 for one it lacks (each row needs two).
+
+    Returns:
+        (M, 3) the fitted transforms.
+    """
+    t = np.array(transform, float)
+    for _ in range(iterations):
+        c, s = np.cos(t[:, 2]), np.sin(t[:, 2])
+        rot = np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], -2)[:, None]  # (M, 1, 2, 2)
+        cov = cov_dst + rot @ cov_src @ np.swapaxes(rot, -1, -2) + 1e-12 * np.eye(2)
+        inv = np.linalg.inv(cov) * w[..., None, None]
+        jac = transform_jacobian(t, src)  # (M, P, 2, 3)
+        res = apply_transform(t, src) - dst
+        info = np.einsum("mpki,mpkl,mplj->mij", jac, inv, jac)
+        step = np.linalg.solve(info + 1e-12 * np.eye(3), -np.einsum("mpki,mpkl,mpl->mi", jac, inv, res)[..., None])[..., 0]
+        t += step
+        if np.abs(step).max() < 1e-10:
+            break
+    return t
+
+
 def join_filters(
     central: MultiRobotFastSLAM,
     local: MultiRobotFastSLAM,
@@ -216,8 +250,8 @@ def join_filters(
     # (each central particle's map may sit slightly differently), or one for all
     t_all = np.broadcast_to(t, (m, 3)).copy()
     if per_pair and len(pairs) >= 2 and pair_transforms is None:
-        mc, ec = cs_store.gather(anc_c[:, None], cs[None], ("mean", "exists"))
-        ml, el = ls_store.gather(anc_l[:, None], ls[None], ("mean", "exists"))
+        mc, sc, ec = cs_store.gather(anc_c[:, None], cs[None], ("mean", "cov", "exists"))
+        ml, sl, el = ls_store.gather(anc_l[:, None], ls[None], ("mean", "cov", "exists"))
         w = (ec & el).astype(float)
         n_w = w.sum(1)
         ok = n_w >= 2
@@ -227,7 +261,8 @@ def join_filters(
         min_pair_spread = config.min_spread if config.min_pair_spread is None else config.min_pair_spread
         ok &= spread >= min_pair_spread
         if ok.any():
-            t_all[ok] = rigid_transform_2d(ml[ok, :, :2], mc[ok, :, :2], w[ok])
+            t_all[ok] = gls_pair_transforms(t_all[ok], ml[ok, :, :2], mc[ok, :, :2], sl[ok, :, :2, :2],
+                                            sc[ok, :, :2, :2], w[ok])
     if pair_transforms is not None:
         t_all = np.asarray(pair_transforms(anc_c, anc_l), float).reshape(m, 3)
     elif transform_cov is not None and np.isfinite(transform_cov).all():
