@@ -27,10 +27,12 @@ from mrslam_core.exploration.config import ExplorationConfig, GridConfig
 from mrslam_core.exploration.coverage import explored_fraction
 from mrslam_core.exploration.explorer import Explorer, State
 from mrslam_core.exploration.grid import OccupancyGrid, Scan
+from mrslam_core.exploration.own_frame import OwnFrameExploration
 from mrslam_core.frontend.camera import StereoRig
 from mrslam_core.frontend.config import FiducialConfig, FrontendConfig
 from mrslam_core.frontend.frontend import Frontend, VisualOdometry
 from mrslam_core.frontend.odometry import planar_motion
+from mrslam_core.fusion.config import FusionConfig
 from mrslam_core.geometry.se2 import between, planar_from_matrix
 from mrslam_core.pipelines.central import CentralConfig, CentralMapper, MapCheckConfig
 from mrslam_core.pipelines.odometry import SOURCES, OdometrySource, visual_step_covariance
@@ -58,6 +60,16 @@ class TeamConfig:
             simulator's), ``visual`` (the frontend's visual odometry) or ``fused`` (both, step by
             step with their information matrices, :class:`OdometryFusion`, the wheels' noise
             model being ``filter.motion``). The frontends' search windows follow the wheels in all.
+        unknown_start: robots whose start pose the central mapper is not given (names
+            ``robot1`` … ``robotK``): each maps and explores alone in its own start frame until
+            the mapper joins it (map alignment, or ``rendezvous``), then hands its grid over and
+            explores with the team (:class:`~mrslam_core.exploration.own_frame.OwnFrameExploration`).
+            If every robot is listed, robot1's start pose defines the map frame.
+        rendezvous: joins go through the team's evidence gate: a strong alignment joins alone, a
+            weak one (its error at the robot beyond the spread the joined cloud carries) waits
+            for a strong one or an agreeing mutual tag sighting (tags: ``fiducials``). Off,
+            every consistent alignment joins (docs/fusion.md).
+        fusion: map alignment and joining (:class:`~mrslam_core.fusion.config.FusionConfig`).
         frontend, fiducials, filter, exploration, control, grid: by default the simulated team
             profile (config/sim_team.yaml). ``fiducials``: the robots whose tags the simulator
             draws and the frontends report as sightings.
@@ -68,6 +80,9 @@ class TeamConfig:
     control_period: float = 0.2
     explore: bool = True
     odometry: Literal["wheel", "visual", "fused"] = "wheel"
+    unknown_start: tuple[str, ...] = ()
+    rendezvous: bool = True
+    fusion: FusionConfig = field(default_factory=FusionConfig)
     sim: SimConfig = field(default_factory=SimConfig)
     frontend: FrontendConfig = field(default_factory=lambda: profile_section(FrontendConfig, TEAM_PROFILE, "frontend"))
     fiducials: FiducialConfig = field(default_factory=lambda: profile_section(FiducialConfig, TEAM_PROFILE, "fiducials"))
@@ -82,6 +97,9 @@ class TeamConfig:
             raise ValueError("need robots >= 1, seconds > 0 and control_period > 0")
         if self.odometry not in SOURCES:
             raise ValueError(f"odometry must be one of {SOURCES}, not {self.odometry!r}")
+        stray = sorted(set(self.unknown_start) - {f"robot{i + 1}" for i in range(self.robots)})
+        if stray:
+            raise ValueError(f"unknown_start names robots the team of {self.robots} does not have: {stray}")
 
 
 def run(cfg: TeamConfig, progress: bool = False, coverage_every: float = 0.0,
@@ -104,18 +122,23 @@ def run(cfg: TeamConfig, progress: bool = False, coverage_every: float = 0.0,
     starts = np.array([sim.ground_truth(n) for n in names])
     rig = StereoRig(*sim.camera_infos(), sim.camera_extrinsic())
     frontends = {n: Frontend(rig, cfg.frontend, robot=n, fiducials=cfg.fiducials) for n in names}
-    mapper = CentralMapper(CentralConfig(robots=tuple(names), start_poses=tuple(float(v) for v in starts.ravel()),
-                                         map_check=cfg.map_check, filter=cfg.filter))
+    mapper = CentralMapper(CentralConfig(
+        robots=tuple(names), start_poses=tuple(float(v) for v in starts.ravel()), unknown_start=cfg.unknown_start,
+        rendezvous=cfg.rendezvous, map_check=cfg.map_check, filter=cfg.filter, fusion=cfg.fusion))
     slam = mapper.slam
     grid = OccupancyGrid(cfg.grid)
-    explorer = Explorer(cfg.exploration, names, Controller(cfg.control))
+    controller = Controller(cfg.control)
+    explorer = Explorer(cfg.exploration, [n for n in names if n not in mapper.local], controller)
+    own: dict[str, OwnFrameExploration] = {}  # the robots not in the map frame (yet)
     odom0 = {n: sim.odometry(n)[0] for n in names}
     at_frame = dict(odom0)  # each robot's odometry at its previous frame: the frontend's motion prior
     feed = _OdometryFeed(cfg, mapper, names)
     for n in names:
         feed.wheel(n, sim.time_ns, odom0[n])
     sightings = dict.fromkeys(names, 0)  # the other robots' tags each one reported
-    rec = {n: {"t": [0.0], "est": [starts[i]], "gt": [starts[i]], "odom": [starts[i]]} for i, n in enumerate(names)}
+    # a robot's trajectory starts at its known start pose, or at its join
+    rec = {n: {"t": [0.0], "est": [starts[i]], "gt": [starts[i]], "odom": [starts[i]]} if n in slam.index
+           else {"t": [], "est": [], "gt": [], "odom": []} for i, n in enumerate(names)}
     next_control = 0
     control_ns = int(cfg.control_period * 1e9)
     truth_free = sim.world.reachable_free(cfg.grid.resolution)
@@ -141,34 +164,54 @@ def run(cfg: TeamConfig, progress: bool = False, coverage_every: float = 0.0,
             sightings[n] += len(obs.sightings)
             mapper.add_observations(obs)
             scans[n] = scan
+        for n in mapper.local:  # an unknown start, or an odometry reset: on its own until it joins
+            if n not in own:
+                own[n] = OwnFrameExploration.create(n, cfg.exploration, cfg.grid, controller)
+                if n in explorer.robots:
+                    explorer.robots.remove(n)
+                    explorer.goals.pop(n, None)
         for done in mapper.process(flush=True):
-            if not done.merged:  # awaiting its re-localisation: no map pose to record or to map from
-                continue
             n = done.robot
+            if not done.merged:  # its own frame, or awaiting its re-localisation: no map pose
+                if n in own and scans.get(n) is not None:
+                    own[n].insert(done.pose, Scan.from_obstacle_scan(scans[n]), _teammates(rec, n))
+                continue
             r = rec[n]
             r["t"].append(done.stamp_ns * 1e-9)
             r["est"].append(done.pose)
             r["gt"].append(sim.ground_truth(n))
             r["odom"].append(_odom_in_map(starts[names.index(n)], feed.first[n], done.odom))
-            if scans.get(n) is not None:  # the other robots at their newest estimates
-                grid.insert(done.pose, Scan.from_obstacle_scan(scans[n]), [rec[o]["est"][-1][:2] for o in names if o != n])
+            if scans.get(n) is not None:
+                grid.insert(done.pose, Scan.from_obstacle_scan(scans[n]), _teammates(rec, n))
+        for n in [n for n in own if n not in mapper.local]:  # joined: its grid goes into the team's, it explores with the team
+            join = [m for m in mapper.merges if m["robot"] == n and m["accepted"]][-1]
+            own.pop(n).hand_over(grid, np.array(join["transform"]))
+            explorer.robots.append(n)
         if coverage is not None and sim.time_ns >= next_coverage:
             next_coverage += coverage_ns
             coverage.append((sim.time_ns * 1e-9, _explored(grid, truth_free, cfg.grid.resolution)))
         if cfg.explore and sim.time_ns >= next_control:
             next_control += control_ns
-            poses = {n: slam.estimate().mean[slam.index[n]] for n in names}
+            now = sim.time_ns * 1e-9
+            est = slam.estimate()
+            poses = {n: est.mean[slam.index[n]] for n in explorer.robots}
+            own_poses = {n: mapper.local[n].estimate().mean[0] for n in own}
             for n in names:  # the bumpers: what the robots touch is an obstacle
                 touch = sim.contacts(n)
-                if len(touch):
-                    explorer.bumped(grid, n, touch, poses, sim.time_ns * 1e-9)
-            for n, (v, w) in explorer.step(grid, poses, sim.time_ns * 1e-9).items():
+                if len(touch) and n in own:
+                    own[n].explorer.bumped(own[n].grid, n, touch, own_poses, now)
+                elif len(touch):
+                    explorer.bumped(grid, n, touch, poses, now)
+            commands = explorer.step(grid, poses, now)
+            for n, o in own.items():
+                commands |= o.explorer.step(o.grid, {n: own_poses[n]}, now)
+            for n, (v, w) in commands.items():
                 sim.set_command(n, v, w)
             if explorer.state is State.COMPLETE:
                 break
         if progress and sim.time_ns % int(10e9) == 0:
             print(f"  t = {sim.time_ns * 1e-9:5.0f} s  wall {time.perf_counter() - wall:6.1f} s", file=sys.stderr, flush=True)
-    trajectories = {n: {k: np.array(v) for k, v in r.items()} for n, r in rec.items()}
+    trajectories = {n: {k: np.array(v) for k, v in r.items()} for n, r in rec.items() if r["t"]}
     _, mean, cov, _, _ = slam.best_map()
     end_s = sim.time_ns * 1e-9
     sim.close()
@@ -178,7 +221,8 @@ def run(cfg: TeamConfig, progress: bool = False, coverage_every: float = 0.0,
     return {
         "trajectories": trajectories, "update_ms": np.array(mapper.update_ms), "landmarks": {"mean": mean, "cov": cov},
         "dropped": dict(slam.dropped) | dict(mapper.drops), "map_checks": dict(mapper.map_checks),
-        "relocalizations": mapper.relocalizations, "sightings": sightings,
+        "relocalizations": mapper.relocalizations, "sightings": sightings, "merges": list(mapper.merges),
+        "unmerged": sorted(own),
         "frontend_drops": {n: dict(f.drops) | (dict(f.fiducials.drops) if f.fiducials else {}) for n, f in frontends.items()},
         "explored_fraction": explored, "coverage": None if coverage is None else np.array(coverage),
         "exploration_state": explorer.state.value, **explorer.controller.counters(),
@@ -227,13 +271,18 @@ def write_team_run(out: str | Path, cfg: TeamConfig, res: dict) -> dict:
     """The run folder of a :func:`run` result (``evaluation.report.write_run``); returns the report."""
     counters = ("explored_fraction", "dropped", "frontend_drops", "wall_s", "exploration_state", "boxed_in",
                 "long_turns", "turn_backoffs", "blocked_turns", "outlier_matches", "map_checks",
-                "relocalizations", "sightings")
+                "relocalizations", "sightings", "merges", "unmerged")
     return write_run(out, res["trajectories"], cfg, res["update_ms"], res["landmarks"],
                      extra={k: res[k] for k in counters}, occupancy=res["occupancy"])
 
 
 def _explored(grid: OccupancyGrid, truth_free: np.ndarray, resolution: float) -> float:
     return explored_fraction(grid.observed, grid.origin, grid.res, truth_free, resolution)
+
+
+def _teammates(rec: dict[str, dict], robot: str) -> np.ndarray:
+    """(T, 2) [m] the newest map-frame positions of the robots other than ``robot`` that have one."""
+    return np.array([r["est"][-1][:2] for o, r in rec.items() if o != robot and r["est"]]).reshape(-1, 2)
 
 
 def _odom_in_map(start: np.ndarray, odom0: np.ndarray, odom: np.ndarray) -> np.ndarray:
@@ -248,6 +297,8 @@ def main(argv: list[str]) -> int:
     ap.add_argument("--config", help="YAML with TeamConfig keys")
     ap.add_argument("--robots", type=positive_int, help="team size")
     ap.add_argument("--seconds", type=float)
+    ap.add_argument("--unknown-start", nargs="+", metavar="ROBOT",
+                    help="robots whose start pose the mapper is not given (they join by map alignment)")
     ap.add_argument("--out", default="runs/team")
     args = ap.parse_args(argv)
     try:
@@ -259,9 +310,20 @@ def main(argv: list[str]) -> int:
         cfg = replace(cfg, robots=args.robots)
     if args.seconds:
         cfg = replace(cfg, seconds=args.seconds)
+    try:
+        if args.unknown_start:
+            cfg = replace(cfg, unknown_start=tuple(args.unknown_start))
+    except ValueError as exc:
+        print(f"mrslam team: {exc}", file=sys.stderr)
+        return 2
     print(f"simulated team: {cfg.robots} robots, {cfg.seconds:.0f} s in world {cfg.sim.world}", flush=True)
     res = run(cfg, progress=True)
     report = write_team_run(args.out, cfg, res)
+    for m in res["merges"]:
+        if m["accepted"]:
+            print(f"  {m['robot']} joined at {m['stamp_ns'] * 1e-9:.1f} s by {m['via']}")
+    for name in res["unmerged"]:
+        print(f"  {name} did not join (no map pose, not in the report's robots)")
     for name, r in report["robots"].items():
         print(f"  {name}: ATE {r['ate_rmse_m']:.3f} m (odometry {r['odom_ate_rmse_m']:.3f} m), RPE {r['rpe_rmse_m']:.3f} m")
     u = report["update_ms"]
