@@ -340,6 +340,11 @@ def path_msg(poses: np.ndarray, stamps_ns: np.ndarray, frame_id: str) -> Path:
     return msg
 
 
+def start_frame(robot: str) -> str:
+    """The frame of a robot's own start pose: its poses before it joins the map are in it."""
+    return f"{robot}/start"
+
+
 def pose_stamped_msg(pose: np.ndarray, stamp_ns: int, frame_id: str) -> PoseStamped:
     """Planar pose (x [m], y [m], θ [rad]) (3,) at ``stamp_ns`` in ``frame_id`` -> PoseStamped."""
     msg = PoseStamped()

@@ -76,7 +76,8 @@ class DemoConfig:
         faults: faults to inject, in any order.
         node_prefix: per node label, command words before its interpreter, e.g.
             ``{sim: [ip, netns, exec, robots]}`` to run the robots' side on another (network) host.
-        team: team size, duration, world, frontend, filter, exploration (shared with ``mrslam team``).
+        team: team size, duration, world, frontend, filter, exploration, unknown starts (shared
+            with ``mrslam team``).
     """
 
     real_time_factor: float = 0.7
@@ -116,6 +117,7 @@ def slam_params(cfg: DemoConfig, facts: dict, out: Path):
 
     return SlamNodeConfig(robots=tuple(facts["names"]), start_poses=tuple(float(v) for v in facts["starts"].ravel()),
                           max_wait=cfg.max_wait, filter=cfg.team.filter, map_check=cfg.team.map_check,
+                          unknown_start=cfg.team.unknown_start, rendezvous=cfg.team.rendezvous, fusion=cfg.team.fusion,
                           odometry=(cfg.team.odometry,), wheel_motion=cfg.team.filter.motion,
                           output_dir=str(out / "slam"),
                           checkpoint=str(out / "slam" / "checkpoint.npz"), checkpoint_period=cfg.checkpoint_period)

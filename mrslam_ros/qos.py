@@ -14,6 +14,8 @@ Conventions (REP-2003 and the tf2 defaults):
   subscribes transient-local only where every publisher offers it (:func:`adapted_to_publishers`),
   so a restarted node receives what was published while it was down and a robot driver's volatile
   odometry still matches.
+- a robot's join (``/<robot>/start_pose``, where its start frame lies in the map): reliable,
+  transient-local, keep-last 1, so an exploration node that starts later still places the robot.
 - everything else: reliable, volatile, keep-last 10.
 """
 
@@ -35,6 +37,7 @@ TF_STATIC = _profile(100, DurabilityPolicy.TRANSIENT_LOCAL)
 MAP = _profile(1, DurabilityPolicy.TRANSIENT_LOCAL)
 ODOMETRY_HISTORY = _profile(100, DurabilityPolicy.TRANSIENT_LOCAL)
 OBSERVATION_HISTORY = _profile(50, DurabilityPolicy.TRANSIENT_LOCAL)
+JOIN = _profile(1, DurabilityPolicy.TRANSIENT_LOCAL)
 
 _BY_NAME = {"/tf": TF, "/tf_static": TF_STATIC, "/clock": CLOCK, "/map": MAP}
 
@@ -42,10 +45,12 @@ _BY_NAME = {"/tf": TF, "/tf_static": TF_STATIC, "/clock": CLOCK, "/map": MAP}
 def qos_for_topic(topic: str) -> QoSProfile:
     """The profile to publish or subscribe ``topic`` (fully qualified name) with.
 
-    Transient-local topics (``/tf_static``, ``/map``) get their latched profile; all others the
+    Transient-local topics (``/tf_static``, ``/map``, ``/<robot>/start_pose``) get their latched profile; all others the
     reliable volatile default. A transient-local publisher also serves volatile subscribers, so a
     recorder or player may use this for both ends.
     """
+    if topic.endswith("/start_pose"):
+        return JOIN
     return _BY_NAME.get(topic, DEFAULT)
 
 

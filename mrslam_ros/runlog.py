@@ -38,8 +38,10 @@ def deserialize(data: bytes, msgtype: str):
 
 def read_series(bag: str | Path, robots: Iterable[str], kinds: Iterable[str] = ("pose", "ground_truth", "odom")
                 ) -> dict[str, dict[str, Series]]:
-    """robot -> kind -> :class:`Series` from ``/<robot>/<kind>`` (Odometry or PoseWithCovarianceStamped)."""
-    from mrslam_ros.conversions import ConversionError, msg_to_pose, stamp_to_ns
+    """robot -> kind -> :class:`Series` from ``/<robot>/<kind>`` (Odometry or PoseWithCovarianceStamped).
+    A robot's poses in its own start frame (``<robot>/start``, before it joined the map) are left
+    out: they are in no frame the others are."""
+    from mrslam_ros.conversions import ConversionError, msg_to_pose, stamp_to_ns, start_frame
 
     robots, kinds = list(robots), list(kinds)
     out = {r: {k: Series() for k in kinds} for r in robots}
@@ -47,6 +49,8 @@ def read_series(bag: str | Path, robots: Iterable[str], kinds: Iterable[str] = (
     for m in read_bag(bag, topics):
         r, k = topics[m.topic]
         msg = deserialize(m.data, m.msgtype)
+        if msg.header.frame_id == start_frame(r):
+            continue
         try:
             pose = msg_to_pose(msg.pose.pose)
         except ConversionError:

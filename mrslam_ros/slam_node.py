@@ -9,7 +9,10 @@ for joining a robot with an unknown start). The ordering, pairing with
 odometry, the filter and the merging of robots with an unknown start pose (``unknown_start``) live
 in :class:`mrslam_core.pipelines.central.CentralMapper`; this node
 converts and publishes: ``/<robot>/pose`` (PoseWithCovarianceStamped, map) and map ->
-``<robot>/odom`` on /tf after every update of that robot, and on a timer (``map_period``) each
+``<robot>/odom`` on /tf after every update of that robot; for a robot not joined yet its pose in
+its own start frame (``/<robot>/pose`` in ``<robot>/start``, no /tf), and when it joins
+``/<robot>/start_pose`` (PoseStamped, map, latched: the pose of its start frame in the map, i.e.
+the join's transform); on a timer (``map_period``) each
 robot's ``/<robot>/path`` (when it grew), the best particle's landmarks (``/slam/landmarks``
 PointCloud2 and ``/slam/landmark_markers`` ellipsoids), ``/slam/particles`` (PoseArray of every
 particle's robot poses) and ``/diagnostics``.
@@ -36,7 +39,7 @@ from functools import partial
 from pathlib import Path
 
 import numpy as np
-from geometry_msgs.msg import PoseArray, PoseWithCovarianceStamped
+from geometry_msgs.msg import PoseArray, PoseStamped, PoseWithCovarianceStamped
 from nav_msgs.msg import Odometry, Path as PathMsg
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.clock import Clock, ClockType
@@ -63,12 +66,14 @@ from mrslam_ros.conversions import (
     pose_array_msg,
     pose_stamped_msg,
     pose_with_covariance,
+    start_frame,
     transform_msg,
 )
 from mrslam_ros.diagnostics import Diagnostics
 from mrslam_core.pipelines.odometry import OdometrySource
 from mrslam_core.slam.config import MotionConfig
 from mrslam_ros.params import declare_config, read_config
+from mrslam_ros.qos import qos_for_topic
 from mrslam_ros.spin import drop_untakeable, run_node
 
 _OBS_TOPIC = re.compile(r"^/([^/]+)/observations$")
@@ -173,6 +178,8 @@ class SlamNode(Node):
         self._path_sent = {r: len(p.poses) for r, p in self.paths.items()}  # sent once it grows
         self.pose_pub = {r: self.create_publisher(PoseWithCovarianceStamped, f"/{r}/pose", 10) for r in robots}
         self.path_pub = {r: self.create_publisher(PathMsg, f"/{r}/path", 10) for r in robots}
+        self.start_pub = {r: self.create_publisher(PoseStamped, f"/{r}/start_pose", qos_for_topic(f"/{r}/start_pose"))
+                          for r in robots}
         self.tf_pub = self.create_publisher(TFMessage, "/tf", 100)
         self.cloud_pub = self.create_publisher(PointCloud2, "/slam/landmarks", 1)
         self.marker_pub = self.create_publisher(MarkerArray, "/slam/landmark_markers", 1)
@@ -215,6 +222,9 @@ class SlamNode(Node):
         # what a resumed mapper logged before its checkpoint is not logged again
         self._merges_logged, self._relocs_logged, self._restarts_logged = (
             len(self.mapper.merges), len(self.mapper.relocalizations), len(self.mapper.restarts))
+        for m in self.mapper.merges:  # a resumed node latches the joins it made before again
+            if m["accepted"] and m["robot"] not in self.mapper.local:
+                self._publish_join(m)
         self.create_timer(self.cfg.map_period, self.on_timer)
         # the filter runs when a set or sighting comes in and again after each set while sets are
         # due (the guard condition), and on a slow timer for a set that waits on time alone (a late
@@ -323,6 +333,8 @@ class SlamNode(Node):
             self._log_merges()
             if d.merged:  # an unknown-start robot has no map pose (nor map -> odom) before it merges
                 self.publish(d.robot, d.stamp_ns, d.pose, d.cov, d.odom)
+            elif d.robot in self.mapper.local:  # its own start frame, for the exploration node
+                self.pose_pub[d.robot].publish(pose_with_covariance(d.pose, d.cov, d.stamp_ns, start_frame(d.robot)))
             if until < 0:
                 self._wake.trigger()
                 return
@@ -403,6 +415,8 @@ class SlamNode(Node):
     def _log_merges(self) -> None:
         for m in self.mapper.merges[self._merges_logged:]:
             via = m.get("via", "alignment")  # a checkpoint of an earlier version has no "via"
+            if m["accepted"]:
+                self._publish_join(m)
             if m["accepted"] and via == "alignment":
                 self.get_logger().info(f"{m['robot']} merged into the map by map alignment: transform "
                                        f"{m['transform']}, {m['inliers']} inliers, rmse {m['rmse_m']:.3f} m")
@@ -426,6 +440,11 @@ class SlamNode(Node):
             self.get_logger().warning(f"{e['robot']}: odometry jumped {e['jump_m']:.2f} m / {e['turn_rad']:.2f} rad "
                                       "(restarted): mapped on its own until its map aligns with the team's")
         self._restarts_logged = len(self.mapper.restarts)
+
+    def _publish_join(self, merge: dict) -> None:
+        """``/<robot>/start_pose``: where a join put the robot's start frame in the map."""
+        pose = np.asarray(merge["transform"], float)
+        self.start_pub[merge["robot"]].publish(pose_stamped_msg(pose, int(merge["stamp_ns"]), self.cfg.map_frame))
 
     def on_timer(self) -> None:
         self._look_for_unknown_robots()

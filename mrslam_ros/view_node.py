@@ -181,16 +181,20 @@ class ViewNode(Node):
         self.robots.add(robot)
         frame, ns = self.cfg.map_frame, f"/{robot}"
         self.truth_path[robot] = []
+        # a robot not joined yet sends its pose, goal and plan in its own start frame: kept in it,
+        # not drawn in the map where they are not
         self._feed(PoseWithCovarianceStamped, f"{ns}/pose", (f"{ns}/pose",),
-                   lambda m: fv.pose_in_frame(msg_to_pose(m.pose.pose), stamp_to_ns(m.header.stamp), frame), send=True)
+                   lambda m: fv.pose_in_frame(msg_to_pose(m.pose.pose), stamp_to_ns(m.header.stamp),
+                                              m.header.frame_id or frame), send=True)
         self._feed(Path, f"{ns}/path", (f"{ns}/path",),
                    lambda m: fv.poses_in_frame(path_to_poses(m)[0], stamp_to_ns(m.header.stamp), frame), send=True,
                    every=self.cfg.path_period)
         self._feed(PoseStamped, f"{ns}/goal", (f"{ns}/goal",),
-                   lambda m: fv.pose_in_frame(msg_to_pose(m.pose), stamp_to_ns(m.header.stamp), frame), send=True)
+                   lambda m: fv.pose_in_frame(msg_to_pose(m.pose), stamp_to_ns(m.header.stamp), m.header.frame_id or frame),
+                   send=True)
         self._feed(Path, f"{ns}/plan", (f"{ns}/plan",),
-                   lambda m: fv.poses_in_frame(path_to_poses(m)[0], stamp_to_ns(m.header.stamp), frame), send=True,
-                   every=self.cfg.path_period)
+                   lambda m: fv.poses_in_frame(path_to_poses(m)[0], stamp_to_ns(m.header.stamp), m.header.frame_id or frame),
+                   send=True, every=self.cfg.path_period)
         camera = (f"{ns}/image", f"{ns}/image_points", f"{ns}/camera_calibration")
         self._feed(Image, f"{ns}/stereo/left/image_raw", camera[::2], lambda m, r=robot: self._image(r, m))
         self._feed(PointCloud2, f"{ns}/observations", camera[1:2], lambda m, r=robot: self._image_points(r, m))

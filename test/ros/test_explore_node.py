@@ -199,3 +199,43 @@ def test_the_published_map_follows_the_grid_as_it_grows():
         np.testing.assert_array_equal(p1, p2)
     finally:
         rclpy.shutdown()
+
+
+def test_a_robot_without_a_map_pose_explores_alone_and_its_scans_join_the_team_grid():
+    """robot2's poses come in its start frame (an unknown start): its scan (a wall 2 m ahead)
+    goes into its own grid, and it gets commands with robot1 in the map. Its join places its
+    start frame at (3, 1, 90°) in the map: the wall lands at (3, 3) in the team's grid, and
+    robot2 explores with the team. Late poses of its start frame and a third frame are not used."""
+    import rclpy
+    from sensor_msgs.msg import LaserScan
+
+    from mrslam_ros.conversions import ns_to_stamp, pose_stamped_msg, pose_with_covariance
+    from mrslam_ros.explore_node import ExploreNode
+
+    rclpy.init()
+    try:
+        node = ExploreNode(parameter_overrides=[rclpy.parameter.Parameter("robots", value=["robot1", "robot2"])])
+        cov = np.eye(3) * 1e-4
+        scan = LaserScan(angle_min=-0.2, angle_increment=0.02, range_min=0.0, range_max=4.0)
+        scan.ranges = [2.0] * 21
+        node.on_pose("robot1", pose_with_covariance(np.array([5.0, 5.0, 0.0]), cov, 1, "map"))
+        node.on_pose("robot2", pose_with_covariance(np.zeros(3), cov, 1, "robot2/start"))
+        scan.header.stamp = ns_to_stamp(1)
+        node.on_scan("robot2", scan)
+        assert "robot2" in node.own and node.explorer.robots == ["robot1"]
+        assert not node.grid.observed.size and node.own["robot2"].grid.observed.any()
+        node.now_ns = 1
+        node.control()  # both robots get a command, each from its own explorer
+        node.on_start_pose("robot2", pose_stamped_msg(np.array([3.0, 1.0, np.pi / 2]), 5, "map"))
+        assert not node.own and node.explorer.robots == ["robot1", "robot2"]
+        walls = node.grid.centre_of(np.argwhere(node.grid.occupied()))
+        # the wall spans ±0.2 rad at 2 m: x 3 ± 0.4 m, y 3 m (cells of 0.1 m)
+        assert len(walls) and np.abs(walls[:, 1] - 3.0).max() < 0.1 and np.abs(walls[:, 0] - 3.0).max() < 0.5
+        node.on_pose("robot2", pose_with_covariance(np.zeros(3), cov, 4, "robot2/start"))  # older than the join
+        node.on_pose("robot2", pose_with_covariance(np.zeros(3), cov, 6, "odom"))
+        assert not node.own and node.drops["pose_frame"] == 1
+        node.on_pose("robot2", pose_with_covariance(np.array([3.0, 1.0, np.pi / 2]), cov, 6, "map"))
+        node.control()
+        assert set(node.poses) == {"robot1", "robot2"}
+    finally:
+        rclpy.shutdown()

@@ -171,8 +171,10 @@ def test_a_set_is_mapped_when_it_arrives_not_when_the_timer_comes():
 
 
 def test_a_robot_with_an_unknown_start_gets_map_poses_only_once_merged():
+    """Before its merge robot2's poses are in its own start frame and it has no map -> odom; the
+    merge latches its start frame's pose in the map on /robot2/start_pose."""
     import rclpy
-    from geometry_msgs.msg import PoseWithCovarianceStamped
+    from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped
     from nav_msgs.msg import Odometry
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.parameter import Parameter
@@ -182,6 +184,7 @@ def test_a_robot_with_an_unknown_start_gets_map_poses_only_once_merged():
     from mrslam_core.datasets.synthetic import SyntheticWorld, SyntheticWorldConfig
     from mrslam_core.geometry.se2 import compose
     from mrslam_ros.conversions import msg_to_pose, ns_to_stamp, observations_to_cloud, pose_to_msg
+    from mrslam_ros.qos import qos_for_topic
     from mrslam_ros.slam_node import SlamNode
 
     world = SyntheticWorld(SyntheticWorldConfig(num_robots=2, seed=5))
@@ -203,6 +206,8 @@ def test_a_robot_with_an_unknown_start_gets_map_poses_only_once_merged():
         poses, tf_children = [], set()
         feeder.create_subscription(PoseWithCovarianceStamped, "/robot2/pose", poses.append, 100)
         feeder.create_subscription(TFMessage, "/tf", lambda m: tf_children.update(t.child_frame_id for t in m.transforms), 100)
+        joins = []
+        feeder.create_subscription(PoseStamped, "/robot2/start_pose", joins.append, qos_for_topic("/robot2/start_pose"))
         ex = SingleThreadedExecutor()
         ex.add_node(slam)
         ex.add_node(feeder)
@@ -232,7 +237,8 @@ def test_a_robot_with_an_unknown_start_gets_map_poses_only_once_merged():
             for _ in range(20):
                 ex.spin_once(timeout_sec=0.005)
             if i == 50:
-                before_merge = (len(poses), "robot2/odom" in tf_children, list(slam.mapper.local))
+                before_merge = ({p.header.frame_id for p in poses}, "robot2/odom" in tf_children, list(slam.mapper.local),
+                                len(joins))
         end = time.time() + 10
         while time.time() < end and slam.mapper.queued:
             ex.spin_once(timeout_sec=0.05)
@@ -240,9 +246,12 @@ def test_a_robot_with_an_unknown_start_gets_map_poses_only_once_merged():
             ex.spin_once(timeout_sec=0.01)
         merged = [m for m in slam.mapper.merges if m["accepted"]]
         assert len(merged) == 1 and not slam.mapper.local
-        assert before_merge == (0, False, ["robot2"])  # nothing published in the map before
-        assert len(poses) >= 10 and "robot2/odom" in tf_children
-        last = poses[-1]
+        assert before_merge == ({"robot2/start"}, False, ["robot2"], 0)  # nothing in the map before
+        assert len(joins) == 1 and joins[0].header.frame_id == "map"
+        np.testing.assert_allclose(msg_to_pose(joins[0].pose), merged[0]["transform"], atol=1e-12)
+        in_map = [p for p in poses if p.header.frame_id == "map"]
+        assert len(in_map) >= 10 and "robot2/odom" in tf_children
+        last = in_map[-1]
         stamp = last.header.stamp.sec * 1_000_000_000 + last.header.stamp.nanosec
         assert np.linalg.norm(msg_to_pose(last.pose.pose)[:2] - truth[stamp][:2]) < 0.3
     finally:
