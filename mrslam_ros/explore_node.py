@@ -201,7 +201,8 @@ class ExploreNode(Node):
         except ConversionError as exc:
             self.diag.count("bad_bumper", f"{robot}: {exc}")
             return
-        explorer, grid, poses = (own.explorer, own.grid, self.own_poses) if own else (self.explorer, self.grid, self.poses)
+        explorer, grid, poses = ((own.explorer, own.grid, self.own_poses) if own
+                                 else (self.explorer, self.grid, self.poses))
         if explorer.bumped(grid, robot, points, poses, self.now_ns * 1e-9):
             self.get_logger().warning(f"{robot}'s bumper is pressed ahead of it: goal given up, backing off; "
                                       f"{explorer.bumped_goals} such goals so far")

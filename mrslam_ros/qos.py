@@ -45,8 +45,8 @@ _BY_NAME = {"/tf": TF, "/tf_static": TF_STATIC, "/clock": CLOCK, "/map": MAP}
 def qos_for_topic(topic: str) -> QoSProfile:
     """The profile to publish or subscribe ``topic`` (fully qualified name) with.
 
-    Transient-local topics (``/tf_static``, ``/map``, ``/<robot>/start_pose``) get their latched profile; all others the
-    reliable volatile default. A transient-local publisher also serves volatile subscribers, so a
+    Transient-local topics (``/tf_static``, ``/map``, ``/<robot>/start_pose``) get their latched
+    profile; all others the reliable volatile default. A transient-local publisher also serves volatile subscribers, so a
     recorder or player may use this for both ends.
     """
     if topic.endswith("/start_pose"):

@@ -44,7 +44,8 @@ def run_pair(world: str, seed: int, robots: int, seconds: float, unknown: tuple[
             "explored": res["explored_fraction"], "unmerged": res["unmerged"],
             "merges": [{k: m[k] for k in ("robot", "stamp_ns", "via", "accepted", "reason", "transform") if k in m}
                        for m in res["merges"]],
-            "trajectories": {n: {k: tr[k].tolist() for k in ("t", "est", "gt")} for n, tr in res["trajectories"].items()},
+            "trajectories": {n: {k: tr[k].tolist() for k in ("t", "est", "gt")}
+                             for n, tr in res["trajectories"].items()},
         }
     rows = {}
     for i, name in enumerate(f"robot{k + 1}" for k in range(robots)):
@@ -69,10 +70,13 @@ def run_pair(world: str, seed: int, robots: int, seconds: float, unknown: tuple[
 
 
 def _fmt(v, spec: str = ".3f") -> str:
+    """A number for the table, or a dash for none."""
     return "–" if v is None else format(v, spec)
 
 
 def table(records: list[dict]) -> str:
+    """The Markdown table of :func:`run_pair` records: a row per robot, then how many robots with an
+    unknown start joined and the median and count within 1.5× of their ATE ratios."""
     lines = ["| world | seed | robot | start | joined at [s], how | join error [m, °] | ATE from the join, "
              "unknown / known start [m] | ratio | explored unknown / known |",
              "|---|---|---|---|---|---|---|---|---|"]
@@ -103,7 +107,8 @@ def main(argv: list[str]) -> int:
     ap.add_argument("--suite", type=positive_int, metavar="N", help="add N generated worlds (worldgen.suite)")
     ap.add_argument("--seeds", type=non_negative_int, nargs="+", default=[0], metavar="S")
     ap.add_argument("--robots", type=positive_int, default=3, metavar="K")
-    ap.add_argument("--unknown", nargs="+", metavar="ROBOT", help="robots with an unknown start (default: all but robot1)")
+    ap.add_argument("--unknown", nargs="+", metavar="ROBOT",
+                    help="robots with an unknown start (default: all but robot1)")
     ap.add_argument("--seconds", type=positive_float, default=60.0, metavar="T", help="simulated seconds per run")
     ap.add_argument("--jobs", type=positive_int, default=2, metavar="J", help="world × seed pairs in parallel")
     ap.add_argument("--out", default="runs/experiments/fusion_team", metavar="DIR")

@@ -176,7 +176,8 @@ def gls_pair_transforms(
         jac = transform_jacobian(t, src)  # (M, P, 2, 3)
         res = apply_transform(t, src) - dst
         info = np.einsum("mpki,mpkl,mplj->mij", jac, inv, jac)
-        step = np.linalg.solve(info + 1e-12 * np.eye(3), -np.einsum("mpki,mpkl,mpl->mi", jac, inv, res)[..., None])[..., 0]
+        grad = np.einsum("mpki,mpkl,mpl->mi", jac, inv, res)
+        step = np.linalg.solve(info + 1e-12 * np.eye(3), -grad[..., None])[..., 0]
         t += step
         if np.abs(step).max() < 1e-10:
             break

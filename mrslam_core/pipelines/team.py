@@ -183,7 +183,8 @@ def run(cfg: TeamConfig, progress: bool = False, coverage_every: float = 0.0,
             r["odom"].append(_odom_in_map(starts[names.index(n)], feed.first[n], done.odom))
             if scans.get(n) is not None:
                 grid.insert(done.pose, Scan.from_obstacle_scan(scans[n]), _teammates(rec, n))
-        for n in [n for n in own if n not in mapper.local]:  # joined: its grid goes into the team's, it explores with the team
+        # joined: its grid goes into the team's, and it explores with the team
+        for n in [n for n in own if n not in mapper.local]:
             join = [m for m in mapper.merges if m["robot"] == n and m["accepted"]][-1]
             own.pop(n).hand_over(grid, np.array(join["transform"]))
             explorer.robots.append(n)

@@ -63,3 +63,25 @@ def test_a_robot_with_an_unknown_start_explores_alone_and_joins_the_team():
     assert np.hypot(*(path[-1, :2] - start[:2])) > 0.3  # it explored, before and after the join
     for name, tr in res["trajectories"].items():
         assert ate_rmse(tr["est"], tr["gt"]) < 0.1, name
+
+
+def test_the_fusion_team_table_counts_joins_and_ratios():
+    from mrslam_core.experiments.fusion_team import table
+
+    def robot(unknown, joined=None, ate=None, known=None):
+        r = {"unknown_start": unknown, "joined_s": joined, "via": "alignment" if joined else None}
+        if joined is not None:
+            r |= {"join_error_m": 0.02, "join_error_deg": 0.1}
+        if ate is not None:
+            r |= {"ate_m": ate, "known_ate_m": known, "ratio": ate / known}
+        return r
+
+    runs = {"explored": 0.3}
+    records = [{"world": "w", "seed": 0, "known": runs, "unknown": runs,
+                "robots": {"robot1": robot(False, None, 0.02, 0.02), "robot2": robot(True, 5.8, 0.03, 0.02),
+                           "robot3": robot(True, 9.8, 0.05, 0.02), "robot4": robot(True)}}]
+    text = table(records)
+    assert "| w | 0 | robot4 | unknown | – |" in text
+    # robot2 1.5 (within 1.5×), robot3 2.5; robot4 never joined
+    assert text.endswith("2 of 3 robots with an unknown start joined; ATE after the join over the known-start "
+                         "run's: median 2.00, 1 of 2 within 1.5×")
