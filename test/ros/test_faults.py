@@ -81,11 +81,24 @@ def test_the_resumed_central_node_kept_the_trajectories_from_before_the_kill(run
         # from before the central node's kill to past the last fault's end (not to the end: a
         # central node that lags on a loaded machine is stopped with its last seconds queued)
         assert t.min() < KILL_SLAM - 3.0 and t.max() > SECONDS - 10.0, robot
-        gaps = np.diff(t)
-        assert gaps.max() < PAUSE_END - PAUSE + 5.0
+        # the central node adds at most 5 s (its re-localisation tries) to any silence of the robot's
+        # sets: robot2's frontend publishes again some seconds after its pause ends, the more the
+        # more loaded the machine (39.4 s instead of 31 s in one CI run)
+        sets = _set_stamps(tmp / "faults" / "bag", robot)
+        assert np.diff(t).max() < np.diff(sets).max() + 5.0, robot
     t2 = est["robot2.t"] * 1e-9
     # robot2 was silent: no updates in between, updates again after it came back
     assert not ((t2 > PAUSE + 2.0) & (t2 < PAUSE_END - 3.0)).any() and (t2 > PAUSE_END + 1.0).sum() >= 30
+
+
+def _set_stamps(bag: Path, robot: str) -> np.ndarray:
+    """The stamps [s] of the observation sets ``robot``'s frontend published (the bag's)."""
+    from mrslam_ros.conversions import stamp_to_ns
+    from mrslam_ros.runlog import deserialize, read_bag
+
+    topic = f"/{robot}/observations"
+    return np.array([stamp_to_ns(deserialize(m.data, m.msgtype).header.stamp) * 1e-9
+                     for m in read_bag(bag, {topic: robot})])
 
 
 SEEDS = range(3)
