@@ -137,18 +137,18 @@ class GatedAlignment(MatchSplit):
 
 
 def residual_covariances(theta: np.ndarray, cov_t: np.ndarray, cov_s: np.ndarray) -> np.ndarray:
-    """S = Σ_t + R(θ)·Σ_s·R(θ)ᵀ (x, y blocks) for rotations θ (...,) and pairs (P, 2+, 2+):
-    returns (..., P, 2, 2)."""
+    """S = Σ_t + R(θ)·Σ_s·R(θ)ᵀ (x, y blocks) for rotations θ (...,) and pairs (..., P, 2+, 2+)
+    (the pairs' leading axes broadcast against θ's): returns (..., P, 2, 2)."""
     th = np.asarray(theta, float)[..., None]
     c, s = np.cos(th), np.sin(th)
-    a, b, o = cov_s[:, 0, 0], cov_s[:, 1, 1], cov_s[:, 0, 1]
+    a, b, o = cov_s[..., 0, 0], cov_s[..., 1, 1], cov_s[..., 0, 1]
     xx = c * c * a - 2 * c * s * o + s * s * b  # R Σ Rᵀ written out, broadcast over θ
     yy = s * s * a + 2 * c * s * o + c * c * b
     xy = c * s * (a - b) + (c * c - s * s) * o
     out = np.empty(xx.shape + (2, 2))
-    out[..., 0, 0] = xx + cov_t[:, 0, 0]
-    out[..., 1, 1] = yy + cov_t[:, 1, 1]
-    out[..., 0, 1] = out[..., 1, 0] = xy + cov_t[:, 0, 1]
+    out[..., 0, 0] = xx + cov_t[..., 0, 0]
+    out[..., 1, 1] = yy + cov_t[..., 1, 1]
+    out[..., 0, 1] = out[..., 1, 0] = xy + cov_t[..., 0, 1]
     return out
 
 

@@ -38,6 +38,7 @@ from mrslam_core.fusion.acceptance import (
     chi2_align,
     pose_jacobian_transform,
     reference_spread,
+    residual_covariances,
     with_marginals,
 )
 from mrslam_core.fusion.alignment import apply_transform, match_descriptors, transform_jacobian
@@ -169,9 +170,7 @@ def gls_pair_transforms(
     """
     t = np.array(transform, float)
     for _ in range(iterations):
-        c, s = np.cos(t[:, 2]), np.sin(t[:, 2])
-        rot = np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], -2)[:, None]  # (M, 1, 2, 2)
-        cov = cov_dst + rot @ cov_src @ np.swapaxes(rot, -1, -2) + 1e-12 * np.eye(2)
+        cov = residual_covariances(t[:, 2], cov_dst, cov_src) + 1e-12 * np.eye(2)  # (M, P, 2, 2)
         inv = np.linalg.inv(cov) * w[..., None, None]
         jac = transform_jacobian(t, src)  # (M, P, 2, 3)
         res = apply_transform(t, src) - dst
